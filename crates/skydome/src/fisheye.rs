@@ -1,0 +1,1 @@
+//! fisheye (in progress).

@@ -1,0 +1,1 @@
+//! OpenEXR writer and reader for RGB radiance maps (see issue #2).

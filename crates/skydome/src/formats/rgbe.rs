@@ -1,0 +1,1 @@
+//! Radiance RGBE `.hdr` reader and writer (see issue #2).

@@ -1,0 +1,95 @@
+//! Plain pixel buffers shared by every stage.
+//!
+//! Conventions, decided here once for the whole crate:
+//! - pixel origin is the **top-left** corner, `x` grows to the right, `y` grows downwards;
+//! - APIs take coordinates in `(x, y)` order and sizes as `(width, height)`;
+//! - pixel `(x, y)` covers the square `[x, x+1) × [y, y+1)`, so its centre is `(x + 0.5, y + 0.5)`;
+//! - colour is interleaved RGB, row-major: the red value of `(x, y)` is `data[3 * (y * width + x)]`.
+
+/// An interleaved RGB image (`3 * width * height` samples, row-major, origin top-left).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RgbImage<T> {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Interleaved samples `R, G, B, R, G, B, …`; length `3 * width * height`.
+    pub data: Vec<T>,
+}
+
+/// A linear floating-point radiance map (relative units unless a calibration says otherwise).
+pub type HdrImage = RgbImage<f32>;
+
+impl<T: Copy + Default> RgbImage<T> {
+    /// An image of the given size filled with `T::default()` (zero for numbers).
+    pub fn new(width: usize, height: usize) -> Self {
+        Self {
+            width,
+            height,
+            data: vec![T::default(); 3 * width * height],
+        }
+    }
+}
+
+impl<T: Copy> RgbImage<T> {
+    /// Wraps an interleaved buffer; returns `None` when `data.len() != 3 * width * height`.
+    pub fn from_vec(width: usize, height: usize, data: Vec<T>) -> Option<Self> {
+        (width.checked_mul(height)?.checked_mul(3)? == data.len()).then_some(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// Number of pixels (`width * height`).
+    pub fn pixel_count(&self) -> usize {
+        self.width * self.height
+    }
+
+    /// The RGB triple at `(x, y)`; panics when out of bounds (callers iterate within the size).
+    #[inline]
+    pub fn pixel(&self, x: usize, y: usize) -> [T; 3] {
+        let i = 3 * (y * self.width + x);
+        [self.data[i], self.data[i + 1], self.data[i + 2]]
+    }
+
+    /// Sets the RGB triple at `(x, y)`; panics when out of bounds.
+    #[inline]
+    pub fn set_pixel(&mut self, x: usize, y: usize, v: [T; 3]) {
+        let i = 3 * (y * self.width + x);
+        self.data[i..i + 3].copy_from_slice(&v);
+    }
+
+    /// Iterates over RGB triples in row-major order.
+    pub fn pixels(&self) -> impl Iterator<Item = [T; 3]> + '_ {
+        self.data.chunks_exact(3).map(|c| [c[0], c[1], c[2]])
+    }
+}
+
+/// Rec. 709 / sRGB relative luminance of a linear RGB triple.
+#[inline]
+pub fn luminance(rgb: [f32; 3]) -> f32 {
+    0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
+}
+
+/// A circle in pixel coordinates (same conventions as above): centre `(cx, cy)` and radius `r`,
+/// all in pixels. Used for the fish-eye lens's visible image circle and for the 180° horizon.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Circle {
+    /// Centre column in pixels (pixel centres at `x + 0.5`).
+    pub cx: f64,
+    /// Centre row in pixels (pixel centres at `y + 0.5`).
+    pub cy: f64,
+    /// Radius in pixels.
+    pub r: f64,
+}
+
+impl Circle {
+    /// True when the centre of pixel `(x, y)` lies inside the circle.
+    #[inline]
+    pub fn contains_pixel(&self, x: usize, y: usize) -> bool {
+        let dx = x as f64 + 0.5 - self.cx;
+        let dy = y as f64 + 0.5 - self.cy;
+        dx * dx + dy * dy <= self.r * self.r
+    }
+}

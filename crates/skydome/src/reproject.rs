@@ -1,0 +1,1 @@
+//! reproject (in progress).

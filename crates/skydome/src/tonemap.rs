@@ -1,0 +1,1 @@
+//! tonemap (in progress).
