@@ -1,7 +1,29 @@
 //! A bracket: decoded frames of one still scene at different exposures.
 //!
-//! (Decoding, EXIF and validation are being filled in; the types below are the contract that
-//! calibration and merging consume.)
+//! This module turns encoded photos (JPEG, PNG, TIFF; 8 or 16 bits per channel; grey is promoted
+//! to RGB) into [`Frame`]s, reads their exposure from EXIF (or takes it from the caller), and
+//! validates the set before anything downstream sees it:
+//!
+//! - at least two frames, all of the same size and bit depth;
+//! - every frame has an exposure time (from EXIF `ExposureTime`, a `--times` list or a list file);
+//! - no two frames closer than 1/6 stop in relative exposure `t · ISO / N²`;
+//! - no two frames with (nearly) the same pixels although their metadata says the exposures
+//!   differ — the "auto-ISO left on" / "legacy phone returned three identical shots" case;
+//! - images above a pixel limit are refused before their pixels are decoded (decompression bombs).
+//!
+//! Frames are sorted by relative exposure, shortest first.
+//!
+//! **Orientation.** EXIF orientation is applied to the pixels when every frame carries the same
+//! value, so frames come out the way a viewer shows them. When the frames disagree (a phone lying
+//! flat often flips its orientation sensor between shots), applying each value would misalign
+//! pixels that the sensor recorded aligned, so the bracket is refused unless the caller chooses
+//! [`OrientationPolicy::Ignore`], which keeps the stored (sensor) pixel order for every frame.
+//!
+//! Pixel conventions are those of [`crate::image`]: origin top-left, `x` right, `y` down.
+
+use std::io::Cursor;
+
+use thiserror::Error;
 
 /// Pixel samples of one decoded frame: interleaved RGB, row-major, origin top-left.
 #[derive(Debug, Clone, PartialEq)]
@@ -32,6 +54,15 @@ impl Pixels {
     /// True when there are no samples.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// Sample `i` scaled to 0.0..=1.0.
+    #[inline]
+    fn unit(&self, i: usize) -> f32 {
+        match self {
+            Pixels::U8(v) => v[i] as f32 / 255.0,
+            Pixels::U16(v) => v[i] as f32 / 65535.0,
+        }
     }
 }
 
@@ -70,4 +101,802 @@ pub struct Frame {
     pub pixels: Pixels,
     /// Exposure settings.
     pub exposure: Exposure,
+}
+
+/// Capture metadata read from a frame's EXIF, as far as it is present.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CaptureInfo {
+    /// Camera maker (`Make`).
+    pub make: Option<String>,
+    /// Camera model (`Model`).
+    pub model: Option<String>,
+    /// Local capture time `YYYY:MM:DD HH:MM:SS` (`DateTimeOriginal`).
+    pub datetime_original: Option<String>,
+    /// UTC offset of the capture time, `±HH:MM` (`OffsetTimeOriginal`, else `OffsetTime`).
+    pub utc_offset: Option<String>,
+    /// Latitude in degrees, north positive (`GPSLatitude` + `GPSLatitudeRef`).
+    pub gps_latitude_deg: Option<f64>,
+    /// Longitude in degrees, east positive (`GPSLongitude` + `GPSLongitudeRef`).
+    pub gps_longitude_deg: Option<f64>,
+    /// EXIF `WhiteBalance` (0 auto, 1 manual).
+    pub white_balance: Option<u32>,
+    /// EXIF `Orientation` (1..=8), 1 when absent.
+    pub orientation: u16,
+}
+
+/// What to do with EXIF orientation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum OrientationPolicy {
+    /// Rotate/flip pixels as EXIF says when all frames agree; refuse when they disagree.
+    #[default]
+    Apply,
+    /// Keep the stored pixel order of every frame.
+    Ignore,
+}
+
+/// Options for decoding frames.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DecodeOptions {
+    /// Largest accepted image, in pixels (width × height), checked before decoding.
+    pub max_pixels: u64,
+}
+
+impl Default for DecodeOptions {
+    fn default() -> Self {
+        // 250 MP: above every phone sensor on the market, far below what exhausts memory.
+        Self {
+            max_pixels: 250_000_000,
+        }
+    }
+}
+
+/// A decoded file before validation: pixels in stored order, metadata, exposure if EXIF had it.
+#[derive(Debug, Clone)]
+pub struct DecodedFrame {
+    /// File name for messages.
+    pub name: String,
+    /// Width in pixels (stored order, before orientation).
+    pub width: usize,
+    /// Height in pixels (stored order, before orientation).
+    pub height: usize,
+    /// Samples in stored order.
+    pub pixels: Pixels,
+    /// Exposure time from EXIF, if present and valid.
+    pub exif_time_s: Option<f64>,
+    /// ISO from EXIF.
+    pub iso: Option<f64>,
+    /// f-number from EXIF.
+    pub f_number: Option<f64>,
+    /// Other capture metadata.
+    pub info: CaptureInfo,
+    /// Description of an embedded ICC profile that is not sRGB (values are then not sRGB).
+    pub non_srgb_icc: Option<String>,
+}
+
+/// A validated bracket, sorted by relative exposure (shortest first).
+#[derive(Debug, Clone)]
+pub struct Bracket {
+    /// The frames, oriented and sorted.
+    pub frames: Vec<Frame>,
+    /// Capture metadata of the reference frame (the middle exposure).
+    pub info: CaptureInfo,
+    /// Things the user should know that do not stop the merge (one line each).
+    pub warnings: Vec<String>,
+}
+
+impl Bracket {
+    /// Width in pixels.
+    pub fn width(&self) -> usize {
+        self.frames.first().map_or(0, |f| f.width)
+    }
+    /// Height in pixels.
+    pub fn height(&self) -> usize {
+        self.frames.first().map_or(0, |f| f.height)
+    }
+}
+
+/// Why a file or a bracket was refused. Every message names the file when there is one.
+#[derive(Debug, Error, PartialEq)]
+pub enum BracketError {
+    /// The bytes are empty.
+    #[error("{file}: empty file (0 bytes)")]
+    Empty {
+        /// File name.
+        file: String,
+    },
+    /// The format is not JPEG, PNG or TIFF.
+    #[error("{file}: unsupported or unrecognised image format (skydome reads JPEG, PNG and TIFF)")]
+    UnsupportedFormat {
+        /// File name.
+        file: String,
+    },
+    /// The decoder failed (corrupt or truncated).
+    #[error("{file}: cannot decode image: {reason}")]
+    Corrupt {
+        /// File name.
+        file: String,
+        /// The decoder's reason.
+        reason: String,
+    },
+    /// The image is larger than the configured limit.
+    #[error("{file}: image is {width}x{height} = {pixels} pixels, above the limit of {limit} (raise it with --max-pixels)")]
+    TooLarge {
+        /// File name.
+        file: String,
+        /// Width.
+        width: u64,
+        /// Height.
+        height: u64,
+        /// Pixel count.
+        pixels: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// An image too small to be a photo.
+    #[error("{file}: image is only {width}x{height} pixels; a bracket frame needs at least 2x2")]
+    TooSmall {
+        /// File name.
+        file: String,
+        /// Width.
+        width: usize,
+        /// Height.
+        height: usize,
+    },
+    /// Fewer than two frames.
+    #[error("a bracket needs at least 2 frames of different exposure, got {0}")]
+    TooFewFrames(usize),
+    /// Frames of different sizes.
+    #[error(
+        "{file}: size {w}x{h} differs from {first} ({w0}x{h0}); all frames must have the same size"
+    )]
+    SizeMismatch {
+        /// Offending file.
+        file: String,
+        /// Its width.
+        w: usize,
+        /// Its height.
+        h: usize,
+        /// The first file.
+        first: String,
+        /// First width.
+        w0: usize,
+        /// First height.
+        h0: usize,
+    },
+    /// Frames of different bit depths.
+    #[error("{file}: {bits}-bit samples, but {first} has {bits0}-bit; all frames must have the same bit depth")]
+    DepthMismatch {
+        /// Offending file.
+        file: String,
+        /// Its depth.
+        bits: u32,
+        /// First file.
+        first: String,
+        /// First depth.
+        bits0: u32,
+    },
+    /// No exposure time for a file.
+    #[error("{file}: no exposure time in EXIF; give times with --times 1/400,1/100,... (in file order) or --times-file LIST (lines 'FILE TIME')")]
+    MissingExposure {
+        /// File name.
+        file: String,
+    },
+    /// A time that is not a positive finite number of seconds.
+    #[error("{file}: invalid exposure time '{value}': expected a positive number of seconds such as 1/400, 0.0025 or 2")]
+    BadTime {
+        /// File name (or `--times`).
+        file: String,
+        /// The text given.
+        value: String,
+    },
+    /// Wrong number of `--times`.
+    #[error("--times has {given} values but {frames} files were given; give one time per file, in file order")]
+    TimesCount {
+        /// Values given.
+        given: usize,
+        /// Files given.
+        frames: usize,
+    },
+    /// Two frames with (almost) the same exposure.
+    #[error("{file}: exposure {e1} is within 1/6 stop of {other} ({e2}); every frame needs a different exposure (auto-ISO on?)")]
+    DuplicateExposure {
+        /// File name.
+        file: String,
+        /// Its exposure, formatted.
+        e1: String,
+        /// The other file.
+        other: String,
+        /// Its exposure, formatted.
+        e2: String,
+    },
+    /// Two frames whose pixels are (nearly) identical although metadata says otherwise.
+    #[error("{file}: pixels are nearly identical to {other} although their exposures differ by {stops:.2} stops; the camera probably ignored the bracket (auto-ISO or auto-exposure on)")]
+    IdenticalPixels {
+        /// File name.
+        file: String,
+        /// The other file.
+        other: String,
+        /// Claimed difference in stops.
+        stops: f64,
+    },
+    /// EXIF orientations disagree.
+    #[error("{file}: EXIF orientation {o} differs from {first} ({o0}); use --orientation ignore to keep the stored pixel order")]
+    OrientationMismatch {
+        /// File name.
+        file: String,
+        /// Its orientation.
+        o: u16,
+        /// First file.
+        first: String,
+        /// First orientation.
+        o0: u16,
+    },
+}
+
+/// Parses one exposure time in seconds: `1/400`, `0.0025`, `2`, `1/2.5`. `file` names the source
+/// for the error message. Refuses zero, negatives, NaN/infinity and times above 24 hours.
+pub fn parse_time(file: &str, text: &str) -> Result<f64, BracketError> {
+    let bad = || BracketError::BadTime {
+        file: file.to_string(),
+        value: text.to_string(),
+    };
+    let t = text.trim();
+    let v = match t.split_once('/') {
+        Some((n, d)) => {
+            let n: f64 = n.trim().parse().map_err(|_| bad())?;
+            let d: f64 = d.trim().parse().map_err(|_| bad())?;
+            n / d
+        }
+        None => t.parse().map_err(|_| bad())?,
+    };
+    if v.is_finite() && v > 0.0 && v <= 86_400.0 {
+        Ok(v)
+    } else {
+        Err(bad())
+    }
+}
+
+/// Parses a comma-separated `--times` list (e.g. `1/400,1/100,1/25`).
+pub fn parse_times(text: &str) -> Result<Vec<f64>, BracketError> {
+    text.split(',').map(|t| parse_time("--times", t)).collect()
+}
+
+/// Parses a list file: one `FILE TIME` pair per line (whitespace separated; `#` starts a
+/// comment; blank lines ignored). `list_name` is used in error messages. Returns the pairs in
+/// file order; file names are as written (the caller resolves them).
+pub fn parse_list_file(list_name: &str, text: &str) -> Result<Vec<(String, f64)>, BracketError> {
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let mut parts = line.split_whitespace();
+        let (Some(file), Some(time), None) = (parts.next(), parts.next(), parts.next()) else {
+            return Err(BracketError::BadTime {
+                file: format!("{list_name} line {}", n + 1),
+                value: line.to_string(),
+            });
+        };
+        out.push((
+            file.to_string(),
+            parse_time(&format!("{list_name} line {}", n + 1), time)?,
+        ));
+    }
+    Ok(out)
+}
+
+/// Decodes one encoded image (JPEG, PNG or TIFF) and reads its EXIF.
+///
+/// Pixels stay in stored order; [`assemble`] applies orientation once the whole bracket is known.
+pub fn decode(
+    name: &str,
+    bytes: &[u8],
+    opts: &DecodeOptions,
+) -> Result<DecodedFrame, BracketError> {
+    use image::{ImageDecoder, ImageFormat};
+    if bytes.is_empty() {
+        return Err(BracketError::Empty {
+            file: name.to_string(),
+        });
+    }
+    let corrupt = |e: &dyn std::fmt::Display| BracketError::Corrupt {
+        file: name.to_string(),
+        reason: e.to_string(),
+    };
+    let reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| corrupt(&e))?;
+    match reader.format() {
+        Some(ImageFormat::Jpeg | ImageFormat::Png | ImageFormat::Tiff) => {}
+        _ => {
+            return Err(BracketError::UnsupportedFormat {
+                file: name.to_string(),
+            })
+        }
+    }
+    let mut decoder = reader.into_decoder().map_err(|e| corrupt(&e))?;
+    let (w, h) = decoder.dimensions();
+    let pixels = u64::from(w) * u64::from(h);
+    if pixels > opts.max_pixels {
+        return Err(BracketError::TooLarge {
+            file: name.to_string(),
+            width: w.into(),
+            height: h.into(),
+            pixels,
+            limit: opts.max_pixels,
+        });
+    }
+    if w < 2 || h < 2 {
+        return Err(BracketError::TooSmall {
+            file: name.to_string(),
+            width: w as usize,
+            height: h as usize,
+        });
+    }
+    let mut limits = image::Limits::default();
+    // Room for the decoded image as 16-bit RGBA plus the decoder's own buffers.
+    limits.max_alloc = Some(pixels.saturating_mul(8).saturating_add(64 << 20));
+    decoder.set_limits(limits).map_err(|e| corrupt(&e))?;
+    let icc = decoder.icc_profile().ok().flatten();
+    let sixteen = matches!(
+        decoder.color_type(),
+        image::ColorType::L16
+            | image::ColorType::La16
+            | image::ColorType::Rgb16
+            | image::ColorType::Rgba16
+            | image::ColorType::Rgb32F
+            | image::ColorType::Rgba32F
+    );
+    let img = image::DynamicImage::from_decoder(decoder).map_err(|e| corrupt(&e))?;
+    let pixels = if sixteen {
+        Pixels::U16(img.into_rgb16().into_raw())
+    } else {
+        Pixels::U8(img.into_rgb8().into_raw())
+    };
+    let mut frame = DecodedFrame {
+        name: name.to_string(),
+        width: w as usize,
+        height: h as usize,
+        pixels,
+        exif_time_s: None,
+        iso: None,
+        f_number: None,
+        info: CaptureInfo {
+            orientation: 1,
+            ..CaptureInfo::default()
+        },
+        non_srgb_icc: icc.as_deref().and_then(non_srgb_description),
+    };
+    read_exif(bytes, &mut frame);
+    Ok(frame)
+}
+
+/// Fills exposure and capture metadata from the file's EXIF, when it has any.
+fn read_exif(bytes: &[u8], frame: &mut DecodedFrame) {
+    use exif::{In, Tag, Value};
+    let Ok(ex) = exif::Reader::new().read_from_container(&mut Cursor::new(bytes)) else {
+        return;
+    };
+    let get = |tag| ex.get_field(tag, In::PRIMARY).map(|f| &f.value);
+    let num = |tag| -> Option<f64> {
+        let v = match get(tag)? {
+            Value::Rational(r) => r.first().map(|r| r.to_f64()),
+            Value::SRational(r) => r.first().map(|r| r.to_f64()),
+            Value::Short(s) => s.first().map(|&s| f64::from(s)),
+            Value::Long(s) => s.first().map(|&s| f64::from(s)),
+            _ => None,
+        }?;
+        (v.is_finite() && v > 0.0).then_some(v)
+    };
+    let text = |tag| -> Option<String> {
+        match get(tag)? {
+            Value::Ascii(v) => v
+                .first()
+                .map(|s| {
+                    String::from_utf8_lossy(s)
+                        .trim_end_matches('\0')
+                        .trim()
+                        .to_string()
+                })
+                .filter(|s| !s.is_empty()),
+            _ => None,
+        }
+    };
+    let dms = |tag, reftag| -> Option<f64> {
+        let Value::Rational(r) = get(tag)? else {
+            return None;
+        };
+        if r.len() < 3 {
+            return None;
+        }
+        let v = r[0].to_f64() + r[1].to_f64() / 60.0 + r[2].to_f64() / 3600.0;
+        let sign = match text(reftag).as_deref() {
+            Some("S") | Some("W") => -1.0,
+            _ => 1.0,
+        };
+        v.is_finite().then_some(sign * v)
+    };
+    frame.exif_time_s = num(Tag::ExposureTime).filter(|&t| t <= 86_400.0);
+    frame.f_number = num(Tag::FNumber);
+    frame.iso = num(Tag::PhotographicSensitivity);
+    let info = &mut frame.info;
+    info.make = text(Tag::Make);
+    info.model = text(Tag::Model);
+    info.datetime_original = text(Tag::DateTimeOriginal);
+    info.utc_offset = text(Tag::OffsetTimeOriginal).or_else(|| text(Tag::OffsetTime));
+    info.gps_latitude_deg = dms(Tag::GPSLatitude, Tag::GPSLatitudeRef);
+    info.gps_longitude_deg = dms(Tag::GPSLongitude, Tag::GPSLongitudeRef);
+    info.white_balance = get(Tag::WhiteBalance).and_then(|v| v.get_uint(0));
+    info.orientation = get(Tag::Orientation)
+        .and_then(|v| v.get_uint(0))
+        .and_then(|o| u16::try_from(o).ok())
+        .filter(|o| (1..=8).contains(o))
+        .unwrap_or(1);
+}
+
+/// The description of an ICC profile when it is not an sRGB profile, `None` for sRGB.
+///
+/// Written by hand because only the profile's description tag is needed: a full colour-management
+/// crate (lcms2, qcms) would pull C code or a large dependency into the wasm build for one string.
+fn non_srgb_description(icc: &[u8]) -> Option<String> {
+    let desc = icc_description(icc).unwrap_or_else(|| "unnamed ICC profile".to_string());
+    let lower = desc.to_ascii_lowercase();
+    (!(lower.contains("srgb") || lower.contains("iec61966-2"))).then_some(desc)
+}
+
+/// Reads the `desc` tag of an ICC profile (v2 `desc` ASCII or v4 `mluc` UTF-16BE).
+fn icc_description(icc: &[u8]) -> Option<String> {
+    let be32 = |o: usize| -> Option<usize> {
+        icc.get(o..o + 4)
+            .map(|b| u32::from_be_bytes([b[0], b[1], b[2], b[3]]) as usize)
+    };
+    let count = be32(128)?;
+    for i in 0..count.min(1024) {
+        let e = 132 + 12 * i;
+        if icc.get(e..e + 4)? != b"desc" {
+            continue;
+        }
+        let (off, size) = (be32(e + 4)?, be32(e + 8)?);
+        let tag = icc.get(off..off.checked_add(size)?)?;
+        return match tag.get(0..4)? {
+            b"desc" => {
+                let n = u32::from_be_bytes(tag.get(8..12)?.try_into().ok()?) as usize;
+                let s = tag.get(12..12 + n.min(tag.len().saturating_sub(12)))?;
+                Some(
+                    String::from_utf8_lossy(s)
+                        .trim_end_matches('\0')
+                        .to_string(),
+                )
+            }
+            b"mluc" => {
+                let len = u32::from_be_bytes(tag.get(20..24)?.try_into().ok()?) as usize;
+                let off = u32::from_be_bytes(tag.get(24..28)?.try_into().ok()?) as usize;
+                let s = tag.get(off..off.checked_add(len)?)?;
+                let units: Vec<u16> = s
+                    .chunks_exact(2)
+                    .map(|c| u16::from_be_bytes([c[0], c[1]]))
+                    .collect();
+                Some(String::from_utf16_lossy(&units))
+            }
+            _ => None,
+        };
+    }
+    None
+}
+
+/// Validates decoded frames and turns them into a sorted [`Bracket`].
+///
+/// `times`, when given, are exposure times in seconds in the order of `decoded` and override
+/// EXIF; otherwise every frame needs an EXIF `ExposureTime`.
+pub fn assemble(
+    decoded: Vec<DecodedFrame>,
+    times: Option<&[f64]>,
+    orientation: OrientationPolicy,
+) -> Result<Bracket, BracketError> {
+    if decoded.len() < 2 {
+        return Err(BracketError::TooFewFrames(decoded.len()));
+    }
+    if let Some(t) = times {
+        if t.len() != decoded.len() {
+            return Err(BracketError::TimesCount {
+                given: t.len(),
+                frames: decoded.len(),
+            });
+        }
+        for &v in t {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(BracketError::BadTime {
+                    file: "--times".into(),
+                    value: v.to_string(),
+                });
+            }
+        }
+    }
+    let first = &decoded[0];
+    for d in &decoded[1..] {
+        if (d.width, d.height) != (first.width, first.height) {
+            return Err(BracketError::SizeMismatch {
+                file: d.name.clone(),
+                w: d.width,
+                h: d.height,
+                first: first.name.clone(),
+                w0: first.width,
+                h0: first.height,
+            });
+        }
+        if d.pixels.bit_depth() != first.pixels.bit_depth() {
+            return Err(BracketError::DepthMismatch {
+                file: d.name.clone(),
+                bits: d.pixels.bit_depth(),
+                first: first.name.clone(),
+                bits0: first.pixels.bit_depth(),
+            });
+        }
+        if orientation == OrientationPolicy::Apply && d.info.orientation != first.info.orientation {
+            return Err(BracketError::OrientationMismatch {
+                file: d.name.clone(),
+                o: d.info.orientation,
+                first: first.name.clone(),
+                o0: first.info.orientation,
+            });
+        }
+    }
+
+    let mut warnings = Vec::new();
+    differing(&decoded, "ISO", |d| d.iso, &mut warnings);
+    differing(
+        &decoded,
+        "aperture (f-number)",
+        |d| d.f_number,
+        &mut warnings,
+    );
+    differing(
+        &decoded,
+        "white balance mode",
+        |d| d.info.white_balance.map(f64::from),
+        &mut warnings,
+    );
+    if let Some(p) = decoded.iter().find_map(|d| d.non_srgb_icc.as_ref()) {
+        warnings.push(format!(
+            "embedded ICC profile '{p}' is not sRGB: pixel values are not sRGB (the response calibration absorbs the tone curve, but colours stay in that profile's primaries)"
+        ));
+    }
+
+    let mut frames = Vec::with_capacity(decoded.len());
+    let mut infos = Vec::with_capacity(decoded.len());
+    for (i, d) in decoded.into_iter().enumerate() {
+        let time_s = match times {
+            Some(t) => t[i],
+            None => d.exif_time_s.ok_or_else(|| BracketError::MissingExposure {
+                file: d.name.clone(),
+            })?,
+        };
+        let exposure = Exposure {
+            time_s,
+            iso: d.iso,
+            f_number: d.f_number,
+        };
+        let (width, height, pixels) = match orientation {
+            OrientationPolicy::Apply if d.info.orientation != 1 => {
+                orient(d.width, d.height, d.pixels, d.info.orientation)
+            }
+            _ => (d.width, d.height, d.pixels),
+        };
+        infos.push(d.info);
+        frames.push(Frame {
+            name: d.name,
+            width,
+            height,
+            pixels,
+            exposure,
+        });
+    }
+    let mut order: Vec<usize> = (0..frames.len()).collect();
+    order.sort_by(|&a, &b| {
+        frames[a]
+            .exposure
+            .relative()
+            .total_cmp(&frames[b].exposure.relative())
+    });
+    let mut slots: Vec<Option<Frame>> = frames.into_iter().map(Some).collect();
+    let frames: Vec<Frame> = order.iter().filter_map(|&i| slots[i].take()).collect();
+    let info = infos[order[order.len() / 2]].clone();
+
+    for pair in frames.windows(2) {
+        let (a, b) = (&pair[0], &pair[1]);
+        let stops = (b.exposure.relative() / a.exposure.relative()).log2();
+        if stops < 1.0 / 6.0 {
+            return Err(BracketError::DuplicateExposure {
+                file: b.name.clone(),
+                e1: describe(&b.exposure),
+                other: a.name.clone(),
+                e2: describe(&a.exposure),
+            });
+        }
+        if nearly_identical(a, b) {
+            return Err(BracketError::IdenticalPixels {
+                file: b.name.clone(),
+                other: a.name.clone(),
+                stops,
+            });
+        }
+    }
+    Ok(Bracket {
+        frames,
+        info,
+        warnings,
+    })
+}
+
+fn describe(e: &Exposure) -> String {
+    let t = if e.time_s < 1.0 {
+        format!("1/{:.0} s", 1.0 / e.time_s)
+    } else {
+        format!("{} s", e.time_s)
+    };
+    let mut s = t;
+    if let Some(iso) = e.iso {
+        s += &format!(" ISO {iso}");
+    }
+    if let Some(n) = e.f_number {
+        s += &format!(" f/{n}");
+    }
+    s
+}
+
+fn differing(
+    decoded: &[DecodedFrame],
+    what: &str,
+    key: impl Fn(&DecodedFrame) -> Option<f64>,
+    warnings: &mut Vec<String>,
+) {
+    let vals: Vec<(String, f64)> = decoded
+        .iter()
+        .filter_map(|d| key(d).map(|v| (d.name.clone(), v)))
+        .collect();
+    if let Some((n0, v0)) = vals.first() {
+        if let Some((n, v)) = vals.iter().find(|(_, v)| (v - v0).abs() > 1e-9 * v0.abs()) {
+            warnings.push(format!(
+                "{what} differs between frames ({n0}: {v0}, {n}: {v}); exposure accounts for it as t·ISO/N², but check the bracket was shot as intended"
+            ));
+        }
+    }
+}
+
+/// True when two frames carry (nearly) the same picture: the mean brightness of the pixels that
+/// are unclipped in both differs by less than 2 %, and the mean absolute difference is below
+/// 1.5 % of full scale. Frames that genuinely differ by ≥ 1/6 stop differ by ≥ 12 % in linear
+/// terms, which even a strong tone curve does not squeeze below 2 %. Samples every 7th pixel.
+fn nearly_identical(a: &Frame, b: &Frame) -> bool {
+    let n = a.pixels.len().min(b.pixels.len());
+    let (mut sa, mut sb, mut sad, mut count) = (0f64, 0f64, 0f64, 0usize);
+    let mut i = 0;
+    while i + 2 < n {
+        for c in 0..3 {
+            let (va, vb) = (a.pixels.unit(i + c), b.pixels.unit(i + c));
+            let clipped = |v: f32| !(0.02..=0.98).contains(&v);
+            if clipped(va) && clipped(vb) {
+                continue;
+            }
+            sa += f64::from(va);
+            sb += f64::from(vb);
+            sad += f64::from((va - vb).abs());
+            count += 1;
+        }
+        i += 21;
+    }
+    // Too few usable samples (frames almost all black or white): nothing to compare.
+    if count < n / 21 / 100 + 10 {
+        return false;
+    }
+    let (ma, mb) = (sa / count as f64, sb / count as f64);
+    (ma - mb).abs() < 0.02 * ma.max(mb) && sad / (count as f64) < 0.015
+}
+
+/// Applies EXIF orientation `o` (2..=8) to interleaved RGB samples.
+fn orient(w: usize, h: usize, pixels: Pixels, o: u16) -> (usize, usize, Pixels) {
+    fn go<T: Copy + Default>(w: usize, h: usize, src: &[T], o: u16) -> (usize, usize, Vec<T>) {
+        let swap = o >= 5;
+        let (ow, oh) = if swap { (h, w) } else { (w, h) };
+        let mut dst = vec![T::default(); src.len()];
+        for y in 0..h {
+            for x in 0..w {
+                // Destination of stored pixel (x, y) for each EXIF orientation (CIPA DC-008).
+                let (dx, dy) = match o {
+                    2 => (w - 1 - x, y),
+                    3 => (w - 1 - x, h - 1 - y),
+                    4 => (x, h - 1 - y),
+                    5 => (y, x),
+                    6 => (h - 1 - y, x),
+                    7 => (h - 1 - y, w - 1 - x),
+                    8 => (y, w - 1 - x),
+                    _ => (x, y),
+                };
+                let s = 3 * (y * w + x);
+                let d = 3 * (dy * ow + dx);
+                dst[d..d + 3].copy_from_slice(&src[s..s + 3]);
+            }
+        }
+        (ow, oh, dst)
+    }
+    match pixels {
+        Pixels::U8(v) => {
+            let (ow, oh, d) = go(w, h, &v, o);
+            (ow, oh, Pixels::U8(d))
+        }
+        Pixels::U16(v) => {
+            let (ow, oh, d) = go(w, h, &v, o);
+            (ow, oh, Pixels::U16(d))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(name: &str, w: usize, h: usize, f: impl Fn(usize) -> u8, t: f64) -> DecodedFrame {
+        DecodedFrame {
+            name: name.into(),
+            width: w,
+            height: h,
+            pixels: Pixels::U8((0..3 * w * h).map(f).collect()),
+            exif_time_s: Some(t),
+            iso: None,
+            f_number: None,
+            info: CaptureInfo {
+                orientation: 1,
+                ..Default::default()
+            },
+            non_srgb_icc: None,
+        }
+    }
+
+    #[test]
+    fn times_parse_fractions_and_decimals() {
+        assert_eq!(parse_times("1/400, 0.5,2").unwrap(), vec![0.0025, 0.5, 2.0]);
+        for bad in ["0", "-1/2", "1/0", "abc", "", "nan", "inf", "1e9"] {
+            assert!(parse_time("x", bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn list_file_pairs_and_comments() {
+        let l = parse_list_file("l.txt", "# c\na.jpg 1/8\n\nb.jpg 1  # x\n").unwrap();
+        assert_eq!(l, vec![("a.jpg".into(), 0.125), ("b.jpg".into(), 1.0)]);
+        assert!(parse_list_file("l.txt", "a.jpg\n").is_err());
+    }
+
+    #[test]
+    fn frames_sort_by_relative_exposure_and_iso_counts() {
+        let mut a = frame("a", 4, 4, |i| (i * 3 % 200) as u8 + 20, 1.0 / 100.0);
+        a.iso = Some(100.0);
+        let mut b = frame("b", 4, 4, |i| (i * 5 % 120) as u8, 1.0 / 100.0);
+        b.iso = Some(50.0); // half the exposure of a (ISO 100 assumed when absent)
+        let c = frame("c", 4, 4, |i| (i * 7 % 250) as u8, 1.0 / 25.0);
+        let br = assemble(vec![a, b, c], None, OrientationPolicy::Apply).unwrap();
+        let names: Vec<_> = br.frames.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(names, ["b", "a", "c"]);
+        assert!(br.warnings.iter().any(|w| w.contains("ISO")));
+    }
+
+    #[test]
+    fn identical_pixels_with_different_times_are_refused() {
+        let a = frame("a", 16, 16, |i| (i % 180) as u8 + 30, 0.01);
+        let b = frame("b", 16, 16, |i| (i % 180) as u8 + 30, 0.04);
+        let e = assemble(vec![a, b], None, OrientationPolicy::Apply).unwrap_err();
+        assert!(matches!(e, BracketError::IdenticalPixels { .. }), "{e}");
+    }
+
+    #[test]
+    fn orientation_6_rotates_clockwise() {
+        // 2x1 image: left pixel 10, right pixel 20 -> after rotating 90° clockwise it is 1x2
+        // with 10 on top.
+        let (w, h, p) = orient(2, 1, Pixels::U8(vec![10, 10, 10, 20, 20, 20]), 6);
+        assert_eq!((w, h), (1, 2));
+        assert_eq!(p, Pixels::U8(vec![10, 10, 10, 20, 20, 20]));
+        let (_, _, p) = orient(2, 1, Pixels::U8(vec![10, 10, 10, 20, 20, 20]), 8);
+        assert_eq!(p, Pixels::U8(vec![20, 20, 20, 10, 10, 10]));
+    }
 }
