@@ -1,1 +1,78 @@
-fn main() {}
+//! The `skydome` command line: a thin dispatcher over the `skydome` library.
+//!
+//! Each subcommand lives in its own module with one top-level entry point that turns arguments
+//! into library calls and file writes; no algorithm lives here.
+//!
+//! Exit codes: 0 success, 1 a failed run (one line `error: <file>: <what>` on stderr),
+//! 2 a usage error (reported by clap).
+
+mod calibrate;
+mod compare;
+mod demo;
+mod info;
+mod io;
+mod merge;
+mod radiance;
+mod tonemap;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Calibrated HDR radiance maps of the sky-dome from bracketed fish-eye photos.
+#[derive(Debug, Parser)]
+#[command(name = "skydome", version, about, propagate_version = true)]
+struct Cli {
+    /// No progress bars or warnings on stderr.
+    #[arg(long, short, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Recover the camera response curve from a bracket and save a camera profile (JSON).
+    Calibrate(calibrate::Args),
+    /// Merge a bracket into a radiance map (.hdr, optionally .exr and a preview).
+    Merge(merge::Args),
+    /// Tone-map a radiance map to an 8-bit JPEG/PNG (or 16-bit PNG).
+    Tonemap(tonemap::Args),
+    /// Print a radiance file's header, size and statistics.
+    Info(info::Args),
+    /// Compare two radiance maps after fitting one global scale.
+    Compare(compare::Args),
+    /// Run the whole pipeline on the bracket bundled with skydome.
+    Demo(demo::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let quiet = cli.quiet;
+    let result = match cli.command {
+        Command::Calibrate(a) => calibrate::run(a, quiet),
+        Command::Merge(a) => merge::run(a, quiet),
+        Command::Tonemap(a) => tonemap::run(a, quiet),
+        Command::Info(a) => info::run(a),
+        Command::Compare(a) => compare::run(a),
+        Command::Demo(a) => demo::run(a, quiet),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // `{:#}` joins the context chain on one line: "error: sky.jpg: cannot decode: …".
+            let msg = format!("{e:#}").replace('\n', " ");
+            eprintln!("error: {msg}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// Prints `s` and a newline on stdout; a closed pipe (`skydome info … | head`) ends quietly.
+pub fn out(s: &str) {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    if writeln!(o, "{s}").is_err() {
+        std::process::exit(0);
+    }
+}

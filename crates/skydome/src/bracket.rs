@@ -124,6 +124,100 @@ pub struct CaptureInfo {
     pub orientation: u16,
 }
 
+impl CaptureInfo {
+    /// The capture instant, when both `DateTimeOriginal` and a UTC offset are known.
+    pub fn capture_time(&self) -> Option<time::OffsetDateTime> {
+        let local = parse_exif_datetime(self.datetime_original.as_deref()?)?;
+        let offset = parse_utc_offset(self.utc_offset.as_deref()?)?;
+        Some(local.assume_offset(offset))
+    }
+
+    /// `CAPDATE=`/`GMT=` strings for a Radiance header (`YYYY:MM:DD HH:MM:SS`): local capture time
+    /// when known, UTC when the offset is known too.
+    pub fn header_times(&self) -> (Option<String>, Option<String>) {
+        let local = self
+            .datetime_original
+            .as_deref()
+            .and_then(parse_exif_datetime)
+            .map(format_exif_datetime);
+        let gmt = self.capture_time().map(|t| {
+            format_exif_datetime(time::PrimitiveDateTime::new(
+                t.to_offset(time::UtcOffset::UTC).date(),
+                t.to_offset(time::UtcOffset::UTC).time(),
+            ))
+        });
+        (local, gmt)
+    }
+}
+
+/// Parses an EXIF date-time `YYYY:MM:DD HH:MM:SS` (also accepts `-` in the date and a `T`).
+pub fn parse_exif_datetime(s: &str) -> Option<time::PrimitiveDateTime> {
+    let s = s.trim();
+    let (d, t) = s.split_once([' ', 'T'])?;
+    let d: Vec<&str> = d.split([':', '-']).collect();
+    let t: Vec<&str> = t.split(':').collect();
+    if d.len() != 3 || t.len() < 2 {
+        return None;
+    }
+    let month = time::Month::try_from(d[1].parse::<u8>().ok()?).ok()?;
+    let date =
+        time::Date::from_calendar_date(d[0].parse().ok()?, month, d[2].parse().ok()?).ok()?;
+    let sec: f64 = t.get(2).map_or(Some(0.0), |x| x.parse().ok())?;
+    let time =
+        time::Time::from_hms(t[0].parse().ok()?, t[1].parse().ok()?, sec.floor() as u8).ok()?;
+    Some(time::PrimitiveDateTime::new(date, time))
+}
+
+/// Parses a UTC offset `±HH:MM`, `±HHMM`, `±HH` or `Z`.
+pub fn parse_utc_offset(s: &str) -> Option<time::UtcOffset> {
+    let s = s.trim();
+    if s == "Z" || s == "z" {
+        return Some(time::UtcOffset::UTC);
+    }
+    let (sign, rest) = match s.as_bytes().first()? {
+        b'+' => (1i8, &s[1..]),
+        b'-' => (-1i8, &s[1..]),
+        _ => return None,
+    };
+    let digits: String = rest.chars().filter(|c| *c != ':').collect();
+    if !digits.chars().all(|c| c.is_ascii_digit()) {
+        return None;
+    }
+    let (h, m) = match digits.len() {
+        2 => (digits.parse::<i8>().ok()?, 0),
+        4 => (
+            digits[..2].parse::<i8>().ok()?,
+            digits[2..].parse::<i8>().ok()?,
+        ),
+        _ => return None,
+    };
+    time::UtcOffset::from_hms(sign * h, sign * m, 0).ok()
+}
+
+/// Parses an ISO 8601 instant with offset, e.g. `2026-06-21T12:30:00+02:00` or `…Z`.
+pub fn parse_iso8601(s: &str) -> Option<time::OffsetDateTime> {
+    let s = s.trim();
+    let split = s
+        .char_indices()
+        .skip(11)
+        .find(|(_, c)| matches!(c, '+' | '-' | 'Z' | 'z'))
+        .map(|(i, _)| i)?;
+    let local = parse_exif_datetime(&s[..split])?;
+    Some(local.assume_offset(parse_utc_offset(&s[split..])?))
+}
+
+fn format_exif_datetime(t: time::PrimitiveDateTime) -> String {
+    format!(
+        "{:04}:{:02}:{:02} {:02}:{:02}:{:02}",
+        t.year(),
+        u8::from(t.month()),
+        t.day(),
+        t.hour(),
+        t.minute(),
+        t.second()
+    )
+}
+
 /// What to do with EXIF orientation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum OrientationPolicy {
@@ -887,6 +981,26 @@ mod tests {
         let b = frame("b", 16, 16, |i| (i % 180) as u8 + 30, 0.04);
         let e = assemble(vec![a, b], None, OrientationPolicy::Apply).unwrap_err();
         assert!(matches!(e, BracketError::IdenticalPixels { .. }), "{e}");
+    }
+
+    #[test]
+    fn capture_time_with_offset_gives_gmt() {
+        let info = CaptureInfo {
+            datetime_original: Some("2026:06:21 14:30:05".into()),
+            utc_offset: Some("+02:00".into()),
+            ..Default::default()
+        };
+        let (cap, gmt) = info.header_times();
+        assert_eq!(cap.as_deref(), Some("2026:06:21 14:30:05"));
+        assert_eq!(gmt.as_deref(), Some("2026:06:21 12:30:05"));
+        let t = parse_iso8601("2026-06-21T14:30:05+02:00").unwrap();
+        assert_eq!(t, info.capture_time().unwrap());
+        assert_eq!(parse_iso8601("2026-06-21T12:30:05Z"), Some(t));
+        assert!(parse_iso8601("2026-06-21T12:30:05").is_none());
+        assert_eq!(
+            parse_utc_offset("-0530"),
+            time::UtcOffset::from_hms(-5, -30, 0).ok()
+        );
     }
 
     #[test]

@@ -1,0 +1,231 @@
+//! `skydome calibrate`: recover the camera response from a bracket and save a camera profile.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+use skydome::bracket::Bracket;
+use skydome::image::Circle;
+use skydome::response::{self, CalibrateOptions, CameraProfile, Solver};
+use skydome::sampling::SampleOptions;
+
+use crate::io::{self, BracketArgs, Outputs};
+
+/// How calibration samples and the solve are chosen (shared by `calibrate` and `merge`).
+#[derive(Debug, Clone, clap::Args)]
+pub struct CalibArgs {
+    /// Number of sample pixels N (raised automatically so that N·(frames−1) ≥ 255 unless --method seed).
+    #[arg(long, default_value_t = 100)]
+    pub samples: usize,
+    /// Grid size G: samples are drawn in G×G cells over the usable area.
+    #[arg(long, default_value_t = 10)]
+    pub grid: usize,
+    /// Seed of the sample selection (same seed, same samples).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Smoothness weight λ of the second-derivative term.
+    #[arg(long, default_value_t = 10.0)]
+    pub lambda: f64,
+    /// `robust` rejects clipped, edge and non-monotonic samples and raises N; `seed` is the
+    /// original method exactly (random pixels per cell, no rejection).
+    #[arg(long, value_enum, default_value_t = Method::Robust)]
+    pub method: Method,
+    /// Least-squares solver: `schur` (fast, default) or `svd` (the seed's dense SVD, slow).
+    #[arg(long, value_enum, default_value_t = SolverArg::Schur)]
+    pub solver: SolverArg,
+    /// Sample only inside this circle (centre x, centre y, radius; pixels, origin top-left).
+    #[arg(long, value_parser = parse_circle, value_name = "CX,CY,R")]
+    pub circle: Option<Circle>,
+}
+
+/// Sampling method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    /// Rejection of useless samples and automatic N.
+    Robust,
+    /// The seed's method exactly.
+    Seed,
+}
+
+/// Solver choice.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SolverArg {
+    /// Schur complement + Cholesky.
+    Schur,
+    /// Dense SVD of the full system.
+    Svd,
+}
+
+/// Parses `cx,cy,r` in pixels.
+pub fn parse_circle(s: &str) -> Result<Circle, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}': expected CX,CY,R in pixels, e.g. 1224,1224,1100"))?;
+    match v[..] {
+        [cx, cy, r] if v.iter().all(|x| x.is_finite()) && r > 0.0 => Ok(Circle { cx, cy, r }),
+        _ => Err(format!("'{s}': expected CX,CY,R with a positive radius")),
+    }
+}
+
+impl CalibArgs {
+    /// Library options for these arguments.
+    pub fn options(&self) -> CalibrateOptions {
+        let sampling = match self.method {
+            Method::Robust => SampleOptions {
+                samples: self.samples,
+                grid: self.grid,
+                seed: self.seed,
+                ..SampleOptions::default()
+            },
+            Method::Seed => SampleOptions::seed_method(self.samples, self.grid, self.seed),
+        };
+        CalibrateOptions {
+            sampling,
+            lambda: self.lambda,
+            solver: match self.solver {
+                SolverArg::Schur => Solver::Schur,
+                SolverArg::Svd => Solver::DenseSvd,
+            },
+        }
+    }
+}
+
+/// Arguments of `skydome calibrate`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The bracket: 2 or more photos of one still scene at different exposures.
+    #[arg(required = true, num_args = 1..)]
+    pub images: Vec<PathBuf>,
+    /// The camera profile to write (JSON).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub bracket: BracketArgs,
+    #[command(flatten)]
+    pub calib: CalibArgs,
+    /// The response is known to be linear (e.g. RAW-derived TIFF): write a linear profile.
+    #[arg(long)]
+    pub linear: bool,
+    /// Also solve K times with seeds seed..seed+K−1 and report the spread of g per code.
+    #[arg(long, value_name = "K")]
+    pub repeat: Option<usize>,
+    /// Plot the curves with their sample points (.png or .svg).
+    #[arg(long, value_name = "FILE")]
+    pub plot: Option<PathBuf>,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Replace existing output files.
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    profile: String,
+    sampling: Option<&'a skydome::sampling::SampleReport>,
+    monotonic_fixes: Option<[usize; 3]>,
+    stability: Option<response::Stability>,
+    written: Vec<String>,
+}
+
+/// Fills the camera fields of a profile from the bracket's EXIF.
+pub fn describe_camera(profile: &mut CameraProfile, br: &Bracket) {
+    profile.make = br.info.make.clone();
+    profile.model = br.info.model.clone();
+    profile.iso = br.frames.first().and_then(|f| f.exposure.iso);
+    profile.date = br.info.datetime_original.clone();
+}
+
+/// The top-level entry point for `skydome calibrate`.
+pub fn run(a: Args, quiet: bool) -> Result<()> {
+    io::check_destination(&a.output, &a.images, a.force)?;
+    let br = io::load_bracket(&a.images, &a.bracket, quiet)?;
+    let opts = a.calib.options();
+    let mut outputs = Outputs::default();
+    let mut report = Report {
+        profile: a.output.display().to_string(),
+        sampling: None,
+        monotonic_fixes: None,
+        stability: None,
+        written: Vec::new(),
+    };
+    let spin = io::spinner(quiet, "calibrating");
+    let calibration;
+    let mut profile = if a.linear {
+        CameraProfile::linear()
+    } else {
+        calibration = response::calibrate(&br.frames, a.calib.circle, &opts)
+            .context("calibration failed")?;
+        report.sampling = Some(calibration.report());
+        report.monotonic_fixes = Some(calibration.monotonic_fixes);
+        if let Some(k) = a.repeat {
+            let s = response::stability(&br.frames, a.calib.circle, &opts, k)
+                .context("calibration stability")?;
+            if !s.stable {
+                io::warn(
+                    quiet,
+                    &format!(
+                        "the response is unstable: its spread between seeds is {:.3} (ln units, RMS), above {:.3}; use more samples or check the bracket",
+                        s.rms_spread, s.threshold
+                    ),
+                );
+            }
+            report.stability = Some(s);
+        }
+        if let Some(p) = &a.plot {
+            outputs.add(p, crate::pictures::curve_plot(p, &calibration)?);
+        }
+        calibration.to_profile()
+    };
+    spin.finish_and_clear();
+    describe_camera(&mut profile, &br);
+    outputs.add(&a.output, profile.to_json().into_bytes());
+    let written = outputs.commit(&a.images, a.force)?;
+    report.written = written.iter().map(|p| p.display().to_string()).collect();
+    if a.json {
+        crate::out(&serde_json::to_string_pretty(&report)?);
+    } else if !quiet {
+        print_report(&report);
+    }
+    Ok(())
+}
+
+fn print_report(r: &Report) {
+    if let Some(s) = r.sampling {
+        let raised = if s.target > s.requested {
+            format!(
+                " (raised from {} so that N·(frames−1) ≥ 255)",
+                s.requested
+            )
+        } else {
+            String::new()
+        };
+        crate::out(&format!(
+            "samples: {} used of target {}{raised}; rejected {} clipped, {} edge, {} non-monotonic; grid {}x{}, seed {}",
+            s.used, s.target, s.rejected_clipped, s.rejected_edge, s.rejected_non_monotonic, s.grid, s.grid, s.seed
+        ));
+    }
+    if let Some(f) = r.monotonic_fixes {
+        if f.iter().any(|&n| n > 0) {
+            crate::out(&format!(
+                "made non-decreasing: {} / {} / {} codes (R/G/B) had no support",
+                f[0], f[1], f[2]
+            ));
+        }
+    }
+    if let Some(s) = &r.stability {
+        crate::out(&format!(
+            "stability over {} seeds: RMS spread {:.4}, max {:.4} (ln units) — {}",
+            s.seeds.len(),
+            s.rms_spread,
+            s.max_spread,
+            if s.stable { "stable" } else { "UNSTABLE" }
+        ));
+    }
+    for w in &r.written {
+        crate::out(&format!("wrote {w}"));
+    }
+}

@@ -1,0 +1,229 @@
+//! File-system edge of the command line: reading inputs, loading a bracket, atomic writes.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use skydome::bracket::{self, Bracket, DecodeOptions, OrientationPolicy};
+
+/// Where exposure times come from, as given on the command line.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct BracketArgs {
+    /// Exposure times in seconds, in the order of the files (e.g. 1/400,1/100,1/25); overrides EXIF.
+    #[arg(long, value_name = "T1,T2,...")]
+    pub times: Option<String>,
+    /// A list file with one 'FILE TIME' pair per line; overrides EXIF.
+    #[arg(long, value_name = "LIST")]
+    pub times_file: Option<PathBuf>,
+    /// EXIF orientation: apply it (all frames must agree) or ignore it (stored pixel order).
+    #[arg(long, value_enum, default_value_t = Orientation::Apply)]
+    pub orientation: Orientation,
+    /// Refuse images with more pixels than this (decompression-bomb guard).
+    #[arg(long, default_value_t = DecodeOptions::default().max_pixels, value_name = "PIXELS")]
+    pub max_pixels: u64,
+}
+
+/// EXIF orientation policy on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Orientation {
+    /// Rotate/flip pixels as EXIF says.
+    #[default]
+    Apply,
+    /// Keep the stored pixel order.
+    Ignore,
+}
+
+/// Reads, decodes and validates the bracket named on the command line.
+pub fn load_bracket(files: &[PathBuf], args: &BracketArgs, quiet: bool) -> Result<Bracket> {
+    if files.len() < 2 {
+        bail!(bracket::BracketError::TooFewFrames(files.len()));
+    }
+    let times = match (&args.times, &args.times_file) {
+        (Some(_), Some(_)) => bail!("give either --times or --times-file, not both"),
+        (Some(t), None) => {
+            let t = bracket::parse_times(t)?;
+            if t.len() != files.len() {
+                bail!(bracket::BracketError::TimesCount {
+                    given: t.len(),
+                    frames: files.len()
+                });
+            }
+            Some(t)
+        }
+        (None, Some(list)) => Some(times_from_list(list, files)?),
+        (None, None) => None,
+    };
+    let opts = DecodeOptions {
+        max_pixels: args.max_pixels,
+    };
+    let bar = progress(quiet, files.len() as u64, "decoding");
+    let decoded = files
+        .par_iter()
+        .map(|p| {
+            let name = p.display().to_string();
+            let bytes = std::fs::read(p).with_context(|| format!("{name}: cannot read"))?;
+            let d = bracket::decode(&name, &bytes, &opts)?;
+            bar.inc(1);
+            Ok(d)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    bar.finish_and_clear();
+    let policy = match args.orientation {
+        Orientation::Apply => OrientationPolicy::Apply,
+        Orientation::Ignore => OrientationPolicy::Ignore,
+    };
+    let br = bracket::assemble(decoded, times.as_deref(), policy)?;
+    for w in &br.warnings {
+        warn(quiet, w);
+    }
+    Ok(br)
+}
+
+fn times_from_list(list: &Path, files: &[PathBuf]) -> Result<Vec<f64>> {
+    let name = list.display().to_string();
+    let text = std::fs::read_to_string(list).with_context(|| format!("{name}: cannot read"))?;
+    let pairs = bracket::parse_list_file(&name, &text)?;
+    files
+        .iter()
+        .map(|f| {
+            let fname = f.file_name().map(|s| s.to_string_lossy().to_string());
+            pairs
+                .iter()
+                .find(|(n, _)| {
+                    Path::new(n) == f.as_path()
+                        || Path::new(n).file_name().map(|s| s.to_string_lossy().to_string())
+                            == fname
+                })
+                .map(|(_, t)| *t)
+                .ok_or_else(|| anyhow!("{}: not listed in {name}; add a line '{} TIME'", f.display(), fname.unwrap_or_default()))
+        })
+        .collect()
+}
+
+/// Prints a one-line warning on stderr unless quiet.
+pub fn warn(quiet: bool, msg: &str) {
+    if !quiet {
+        eprintln!("warning: {msg}");
+    }
+}
+
+/// A progress bar on stderr (hidden when quiet or when stderr is not a terminal).
+pub fn progress(quiet: bool, len: u64, what: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(len);
+    if let Ok(style) = ProgressStyle::with_template("{msg:>10} [{bar:30}] {pos}/{len} {elapsed}") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(what.to_string());
+    bar
+}
+
+/// A spinner for a stage of unknown length.
+pub fn spinner(quiet: bool, what: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new_spinner();
+    bar.set_message(what.to_string());
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
+    bar
+}
+
+/// A set of output files written together: every destination is checked before any is written,
+/// each is written to a temporary file in its target folder and renamed into place, so a failed
+/// run leaves no partial file and never touches an input.
+#[derive(Debug, Default)]
+pub struct Outputs {
+    files: Vec<(PathBuf, Vec<u8>)>,
+}
+
+impl Outputs {
+    /// Queues `bytes` for `path`.
+    pub fn add(&mut self, path: &Path, bytes: Vec<u8>) {
+        self.files.push((path.to_path_buf(), bytes));
+    }
+
+    /// Checks every destination, then writes them all atomically. `inputs` are never
+    /// overwritten; existing outputs only with `force`. Returns the paths written.
+    pub fn commit(self, inputs: &[PathBuf], force: bool) -> Result<Vec<PathBuf>> {
+        for (i, (p, _)) in self.files.iter().enumerate() {
+            check_destination(p, inputs, force)?;
+            if self.files[..i].iter().any(|(q, _)| same_file(p, q)) {
+                bail!("{}: named twice as an output", p.display());
+            }
+        }
+        let mut written = Vec::new();
+        for (p, bytes) in self.files {
+            write_atomic(&p, &bytes)?;
+            written.push(p);
+        }
+        Ok(written)
+    }
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == b,
+    }
+}
+
+/// Refuses to write over an input, or over an existing file without `force`, or into a
+/// folder that does not exist.
+pub fn check_destination(p: &Path, inputs: &[PathBuf], force: bool) -> Result<()> {
+    let name = p.display();
+    if inputs.iter().any(|i| same_file(i, p)) {
+        bail!("{name}: refusing to overwrite an input file");
+    }
+    if p.is_dir() {
+        bail!("{name}: is a directory; give a file name");
+    }
+    if p.exists() && !force {
+        bail!("{name}: already exists; use --force to replace it");
+    }
+    let dir = parent_dir(p);
+    if !dir.is_dir() {
+        bail!("{name}: folder {} does not exist", dir.display());
+    }
+    Ok(())
+}
+
+fn parent_dir(p: &Path) -> PathBuf {
+    match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// Writes `bytes` to a temporary file beside `p`, then renames it over `p`.
+pub fn write_atomic(p: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let name = p.display();
+    let dir = parent_dir(p);
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".skydome-")
+        .suffix(".tmp")
+        .tempfile_in(&dir)
+        .with_context(|| format!("{name}: cannot create a file in {}", dir.display()))?;
+    tmp.write_all(bytes)
+        .and_then(|_| tmp.as_file().sync_all())
+        .with_context(|| format!("{name}: cannot write"))?;
+    tmp.persist(p)
+        .map_err(|e| anyhow!("{name}: cannot rename into place: {}", e.error))?;
+    Ok(())
+}
+
+/// Reads a whole file, naming it in the error.
+pub fn read(p: &Path) -> Result<Vec<u8>> {
+    std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))
+}
+
+/// The lower-cased extension of a path.
+pub fn extension(p: &Path) -> String {
+    p.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default()
+}

@@ -1,0 +1,79 @@
+//! Reading and writing radiance maps by file extension (`.hdr` Radiance RGBE, `.exr` OpenEXR).
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use skydome::formats::{exr, rgbe, HdrMeta};
+use skydome::HdrImage;
+
+/// A radiance map read from disk.
+pub struct Radiance {
+    /// Pixels as radiance: stored values divided by the file's `EXPOSURE`.
+    pub image: HdrImage,
+    /// Metadata from the header.
+    pub meta: HdrMeta,
+    /// Header lines (`.hdr`) or `name = value` attributes (`.exr`).
+    pub header: Vec<String>,
+    /// "Radiance RGBE" or "OpenEXR".
+    pub format: &'static str,
+}
+
+/// Reads a `.hdr` or `.exr` file (recognised by its first bytes, not its name).
+pub fn read(path: &Path) -> Result<Radiance> {
+    let name = path.display();
+    let bytes = crate::io::read(path)?;
+    if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+        let f = exr::read_exr(&bytes, &exr::Limits::default()).with_context(|| name.to_string())?;
+        let mut image = f.image;
+        unexpose(&mut image, f.meta.exposure);
+        return Ok(Radiance {
+            image,
+            header: f
+                .text_attributes
+                .iter()
+                .map(|(k, v)| format!("{k} = {v}"))
+                .collect(),
+            meta: f.meta,
+            format: "OpenEXR",
+        });
+    }
+    if bytes.starts_with(b"#?") {
+        let f = rgbe::decode_rgbe(&bytes, &rgbe::Limits::default())
+            .with_context(|| name.to_string())?;
+        let mut image = f.image;
+        unexpose(&mut image, f.header.meta.exposure);
+        return Ok(Radiance {
+            image,
+            meta: f.header.meta,
+            header: f.header.lines,
+            format: "Radiance RGBE",
+        });
+    }
+    bail!("{name}: not a Radiance .hdr or OpenEXR file (unrecognised first bytes)")
+}
+
+/// Radiance's rule: stored pixel = radiance × EXPOSURE.
+fn unexpose(image: &mut HdrImage, exposure: Option<f64>) {
+    if let Some(e) = exposure.filter(|e| e.is_finite() && *e > 0.0 && *e != 1.0) {
+        let k = (1.0 / e) as f32;
+        image.data.iter_mut().for_each(|v| *v *= k);
+    }
+}
+
+/// Encodes a radiance map for `path` by its extension: `.hdr` (RGBE) or `.exr` (half float
+/// unless `float`).
+pub fn encode(path: &Path, image: &HdrImage, meta: &HdrMeta, float: bool) -> Result<Vec<u8>> {
+    let name = path.display();
+    match crate::io::extension(path).as_str() {
+        "hdr" | "pic" | "rgbe" => rgbe::encode_rgbe(image, meta).with_context(|| name.to_string()),
+        "exr" => {
+            let t = if float {
+                exr::ExrPixelType::Float
+            } else {
+                exr::ExrPixelType::Half
+            };
+            exr::encode_exr(image, meta, t).with_context(|| name.to_string())
+        }
+        e => bail!("{name}: cannot write '.{e}' radiance files; use .hdr or .exr"),
+    }
+}

@@ -1,0 +1,114 @@
+//! `skydome merge` on the real photo sets in `../shared/data`, with the outputs checked by
+//! independent readers (OpenCV and OpenImageIO through `scripts/independent_readers.py`).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const BIN: &str = env!("CARGO_BIN_EXE_skydome");
+
+fn shared() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+    if p.is_dir() {
+        Some(p)
+    } else {
+        eprintln!("skipping: ../shared/data not found");
+        None
+    }
+}
+
+/// The Python that has cv2 and OpenImageIO, or `None` (then the check is skipped, unless
+/// SKYDOME_REQUIRE_INDEPENDENT_READERS=1, as in CI, where it fails).
+fn python() -> Option<String> {
+    let py = std::env::var("SKYDOME_PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = Command::new(&py)
+        .args(["-c", "import cv2, OpenImageIO"])
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
+    if ok {
+        return Some(py);
+    }
+    assert!(
+        std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").as_deref() != Ok("1"),
+        "{py} lacks cv2/OpenImageIO but SKYDOME_REQUIRE_INDEPENDENT_READERS=1"
+    );
+    eprintln!("skipping independent readers: {py} lacks cv2/OpenImageIO (pip install -r scripts/requirements.txt)");
+    None
+}
+
+fn merge_set(dir: &Path, files: &[&str], extra: &[&str], out: &Path) -> serde_json::Value {
+    let hdr = out.with_extension("hdr");
+    let exr = out.with_extension("exr");
+    let o = Command::new(BIN)
+        .arg("merge")
+        .args(files.iter().map(|f| dir.join(f)))
+        .args(["-o".as_ref(), hdr.as_os_str(), "--exr".as_ref(), exr.as_os_str()])
+        .args(extra)
+        .args(["--json", "--quiet"])
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "merge failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(hdr.is_file() && exr.is_file());
+    if let Some(py) = python() {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/independent_readers.py");
+        let c = Command::new(py)
+            .arg(script)
+            .arg("--check")
+            .args([&hdr, &exr])
+            .output()
+            .unwrap();
+        assert!(
+            c.status.success(),
+            "independent readers disagree on {}: {}{}",
+            hdr.display(),
+            String::from_utf8_lossy(&c.stdout),
+            String::from_utf8_lossy(&c.stderr)
+        );
+    }
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+#[test]
+fn frobisher_merges_from_exif_alone() {
+    let Some(d) = shared() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let s = merge_set(
+        &d.join("frobisher_001"),
+        &["IMG_2600.jpg", "IMG_2601.jpg", "IMG_2602.jpg"],
+        &[],
+        &tmp.path().join("frobisher"),
+    );
+    let times: Vec<f64> = s["frames"].as_array().unwrap().iter().map(|f| f["time_s"].as_f64().unwrap()).collect();
+    assert_eq!(times, [0.125, 1.0, 8.0]);
+    let hdr = std::fs::read(tmp.path().join("frobisher.hdr")).unwrap();
+    let head = String::from_utf8_lossy(&hdr[..200]);
+    assert!(head.contains("CAPDATE="), "{head}");
+}
+
+#[test]
+fn banterle_room_merges_seven_frames() {
+    let Some(d) = shared() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let names: Vec<String> = (0..7).map(|i| format!("stack_room_exp_{i}.jpg")).collect();
+    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+    let s = merge_set(&d.join("banterle_room"), &refs, &[], &tmp.path().join("room"));
+    assert_eq!(s["frames"].as_array().unwrap().len(), 7);
+}
+
+#[test]
+fn banterle_alignment_files_out_of_order_merge() {
+    let Some(d) = shared() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let s = merge_set(
+        &d.join("banterle_alignment"),
+        &["IMG_4209.jpg", "IMG_4210.jpg", "IMG_4211.jpg"],
+        &[],
+        &tmp.path().join("align"),
+    );
+    let files: Vec<&str> = s["frames"].as_array().unwrap().iter().map(|f| f["file"].as_str().unwrap()).collect();
+    assert!(files[0].ends_with("IMG_4210.jpg") && files[2].ends_with("IMG_4211.jpg"), "{files:?}");
+}
