@@ -1,1 +1,894 @@
-//! tonemap (in progress).
+//! Tone mapping: linear radiance → display pixels (8-bit sRGB with dithering, or 16-bit sRGB).
+//!
+//! # Pipeline
+//! Every operator except [`Operator::MinMax`] runs the same three steps per pixel:
+//!
+//! 1. **Scale.** World luminance `L = 0.2126 R + 0.7152 G + 0.0722 B` (Rec. 709) is multiplied by
+//!    an exposure factor `k`: `k = 2^EV` for a fixed exposure, or `k = key / L̄` with the
+//!    log-average (geometric mean) luminance `L̄ = exp(mean(ln L))` over the unmasked, positive
+//!    pixels for automatic exposure (Reinhard et al. 2002, eq. 1). The geometric mean is chosen
+//!    because a sun covering 0.1 % of the dome barely moves it, while it would set the arithmetic
+//!    mean or the maximum.
+//! 2. **Compress luminance** `Ls = k·L` to display luminance `Ld` with the chosen curve:
+//!    - `linear`: `Ld = Ls`;
+//!    - `reinhard` (Reinhard et al. 2002, eq. 4): `Ld = Ls (1 + Ls / Lw²) / (1 + Ls)` where the
+//!      white point `Lw` (the scaled luminance that maps to 1) defaults to the
+//!      [`ToneMap::white_percentile`] of `Ls` — a percentile, not the maximum, so one sun does
+//!      not decide the curve;
+//!    - `drago` (Drago et al. 2003, eq. 4, with `Ld_max = 100 cd/m²` so the leading factor is
+//!      `1 / log10(Lmax + 1)`): `Ld = ln(Ls + 1) / (log10(Lmax + 1) · ln(2 + 8 (Ls/Lmax)^(ln b / ln 0.5)))`
+//!      with bias `b` (0.85 by default) and `Lmax` the same percentile;
+//!    - `aces`: Narkowicz's 2015 rational fit of the ACES reference rendering transform,
+//!      `Ld = Ls (2.51 Ls + 0.03) / (Ls (2.43 Ls + 0.59) + 0.14)`, applied to luminance.
+//! 3. **Keep hue.** The colour is scaled jointly, `rgb_d = rgb · Ld / L`, so the ratios between
+//!    channels — hue and saturation — survive. Where that pushes a channel above 1 the colour is
+//!    desaturated towards the grey of the same display luminance (`c' = Ld + (c − Ld)·s` with the
+//!    largest `s ≤ 1` that fits) instead of clipping channels one by one, which would turn a
+//!    bright orange sunset yellow. Display luminance ≥ 1 becomes white.
+//!
+//! The result is encoded with the sRGB transfer function (IEC 61966-2-1: `12.92 x` below
+//! `0.0031308`, `1.055 x^(1/2.4) − 0.055` above) through a 4096-entry table with linear
+//! interpolation (error < 2·10⁻⁵, about one 16-bit code), then quantised. 8-bit output adds
+//! ±½ LSB of dither before rounding ([`Dither`]) so the smooth gradients of a clear sky do not
+//! band.
+//!
+//! # `minmax`
+//! [`Operator::MinMax`] is the seed project's operator, kept bit-for-bit in spirit: each channel
+//! is stretched on its own, `round(255 (c − min_c) / (max_c − min_c))`, no transfer function, no
+//! dither. It has two known faults, which is why it is not the default: the sun sets `max_c`, so
+//! on a dome with the sun in it everything else lands in the bottom few codes (a black sky); and
+//! because every channel gets its own scale, a scene whose brightest point is not neutral
+//! changes white balance (a reddish sun makes the sky cyan).
+//!
+//! # Masks, zeros, bad values
+//! Pixels outside [`ToneMap::mask`] are written black and left out of the statistics. Pixels
+//! whose channels are all exactly zero (the area outside the image circle in a fish-eye file)
+//! stay black too: dithering never lifts them. NaN and negative channels count as zero; +∞
+//! counts as brighter than anything else (it maps to white).
+//!
+//! # Speed
+//! One statistics pass (log-average and a 1/32-stop log₂ histogram for percentiles, no copy or
+//! sort of the image) and one mapping pass; both run over row bands with rayon when the
+//! `parallel` feature is on.
+//!
+//! References: E. Reinhard, M. Stark, P. Shirley, J. Ferwerda, "Photographic Tone Reproduction
+//! for Digital Images", SIGGRAPH 2002. F. Drago, K. Myszkowski, T. Annen, N. Chiba, "Adaptive
+//! Logarithmic Mapping For Displaying High Contrast Scenes", Eurographics 2003. K. Narkowicz,
+//! "ACES Filmic Tone Mapping Curve", 2015.
+
+use std::fmt;
+use std::str::FromStr;
+use std::sync::OnceLock;
+
+use crate::image::{luminance, Circle, HdrImage, RgbImage};
+
+#[cfg(feature = "parallel")]
+use rayon::prelude::*;
+
+/// Errors from tone mapping. Each message says what to change.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum TonemapError {
+    /// The image has no pixels.
+    #[error("the image is empty (0 pixels); pass an image with at least one pixel")]
+    EmptyImage,
+    /// `data.len()` does not match `3 · width · height`.
+    #[error("image buffer holds {len} samples but {width}×{height} RGB needs {expected}; build images with RgbImage::from_vec")]
+    BadBuffer {
+        /// Width in pixels.
+        width: usize,
+        /// Height in pixels.
+        height: usize,
+        /// Samples present.
+        len: usize,
+        /// Samples needed.
+        expected: usize,
+    },
+    /// A parameter is outside its meaningful range.
+    #[error("{name} = {value} is out of range: {hint}")]
+    BadParameter {
+        /// Parameter name as the CLI spells it.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+        /// The accepted range.
+        hint: &'static str,
+    },
+    /// An operator name that is not one of [`Operator::NAMES`].
+    #[error("unknown tone-mapping operator '{0}'; use one of: minmax, linear, reinhard, drago, aces")]
+    UnknownOperator(String),
+    /// No unmasked pixel has positive, finite luminance, so automatic exposure has nothing to use.
+    #[error("no pixel inside the mask has positive luminance; check the mask or give a fixed exposure (EV)")]
+    NothingToExpose,
+}
+
+/// A tone-mapping curve. See the module docs for the formulas.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Operator {
+    /// The seed's per-channel min–max stretch (no sRGB, no dither). Kept for comparison.
+    MinMax,
+    /// Exposure then sRGB; highlights above 1 desaturate to white.
+    Linear,
+    /// Reinhard's photographic operator (global, with key and white point).
+    Reinhard,
+    /// Drago's adaptive logarithmic mapping (bias 0.85 by default).
+    Drago,
+    /// Narkowicz's fit of the ACES filmic curve, on luminance. The default.
+    #[default]
+    Aces,
+}
+
+impl Operator {
+    /// The names accepted by [`FromStr`], in documentation order.
+    pub const NAMES: [&'static str; 5] = ["minmax", "linear", "reinhard", "drago", "aces"];
+
+    /// The lower-case name (`"aces"`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Operator::MinMax => "minmax",
+            Operator::Linear => "linear",
+            Operator::Reinhard => "reinhard",
+            Operator::Drago => "drago",
+            Operator::Aces => "aces",
+        }
+    }
+}
+
+impl fmt::Display for Operator {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Operator {
+    type Err = TonemapError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "minmax" | "min-max" => Ok(Operator::MinMax),
+            "linear" => Ok(Operator::Linear),
+            "reinhard" => Ok(Operator::Reinhard),
+            "drago" => Ok(Operator::Drago),
+            "aces" | "filmic" => Ok(Operator::Aces),
+            _ => Err(TonemapError::UnknownOperator(s.to_string())),
+        }
+    }
+}
+
+/// How the scene is scaled before the curve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ExposureMode {
+    /// `k = key / L̄` from the log-average luminance (see [`ToneMap::key`]).
+    Auto,
+    /// `k = 2^EV`: a radiance of `2^-EV` becomes display luminance 1 before the curve.
+    Ev(f64),
+}
+
+/// Dither added to 8-bit output before rounding (amplitude ±½ code value, in encoded space).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dither {
+    /// Plain rounding.
+    None,
+    /// An 8×8 Bayer matrix: deterministic, no noise texture, invisible at normal viewing.
+    Ordered,
+    /// Uniform noise from a hash of `(seed, x, y, channel)`: reproducible for a given seed.
+    Noise {
+        /// Seed of the hash.
+        seed: u64,
+    },
+}
+
+/// Tone-mapping settings. `ToneMap::default()` is the preview skydome writes with no flags:
+/// ACES on auto exposure (key 0.18), 99.5th-percentile white, ordered dither.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToneMap {
+    /// The curve.
+    pub operator: Operator,
+    /// Exposure before the curve.
+    pub exposure: ExposureMode,
+    /// Target display value of the log-average luminance under automatic exposure (Reinhard's
+    /// "key"; 0.18 = middle grey). Range (0, 10].
+    pub key: f64,
+    /// Percentile (in percent, (0, 100]) of scaled luminance used as the white point
+    /// (`reinhard`) and as `Lmax` (`drago`). 100 is the classic maximum; 99.5 keeps a sun that
+    /// covers under 0.5 % of the pixels from setting the scale.
+    pub white_percentile: f64,
+    /// Reinhard's white point in scaled units, overriding the percentile when `Some` (> 0).
+    pub reinhard_white: Option<f64>,
+    /// Drago's bias `b` in (0, 1); 0.85 by default (the paper's recommendation).
+    pub drago_bias: f64,
+    /// Dither for 8-bit output (ignored by 16-bit output and by `minmax`).
+    pub dither: Dither,
+    /// Only pixels whose centres lie inside this circle are mapped and measured; others are black.
+    pub mask: Option<Circle>,
+}
+
+impl Default for ToneMap {
+    fn default() -> Self {
+        Self {
+            operator: Operator::Aces,
+            exposure: ExposureMode::Auto,
+            key: 0.18,
+            white_percentile: 99.5,
+            reinhard_white: None,
+            drago_bias: 0.85,
+            dither: Dither::Ordered,
+            mask: None,
+        }
+    }
+}
+
+impl ToneMap {
+    /// The defaults with another operator.
+    pub fn with_operator(operator: Operator) -> Self {
+        Self {
+            operator,
+            ..Self::default()
+        }
+    }
+
+    fn validate(&self) -> Result<(), TonemapError> {
+        let bad = |name, value, hint| Err(TonemapError::BadParameter { name, value, hint });
+        if !(self.key > 0.0 && self.key <= 10.0) {
+            return bad("key", self.key, "use a key in (0, 10]; 0.18 is middle grey");
+        }
+        if !(self.white_percentile > 0.0 && self.white_percentile <= 100.0) {
+            return bad(
+                "white-percentile",
+                self.white_percentile,
+                "use a percentile in (0, 100]",
+            );
+        }
+        if !(self.drago_bias > 0.0 && self.drago_bias < 1.0) {
+            return bad(
+                "bias",
+                self.drago_bias,
+                "use a Drago bias in (0, 1); 0.85 is the default",
+            );
+        }
+        if let ExposureMode::Ev(ev) = self.exposure {
+            if !(ev.is_finite() && ev.abs() <= 64.0) {
+                return bad("exposure", ev, "use an exposure between -64 and +64 EV");
+            }
+        }
+        if let Some(w) = self.reinhard_white {
+            if !(w > 0.0 && w.is_finite()) {
+                return bad("white", w, "use a positive, finite Reinhard white point");
+            }
+        }
+        if let Some(c) = self.mask {
+            if !(c.r > 0.0 && c.r.is_finite() && c.cx.is_finite() && c.cy.is_finite()) {
+                return bad("mask radius", c.r, "use a circle with a positive, finite radius");
+            }
+        }
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Statistics
+// ---------------------------------------------------------------------------------------------
+
+/// Histogram range of log₂ luminance: [-64, 64) stops at 1/32 stop per bin.
+const HIST_MIN_LOG2: f64 = -64.0;
+const HIST_BINS_PER_STOP: f64 = 32.0;
+const HIST_BINS: usize = 128 * 32;
+
+/// Luminance statistics over the unmasked pixels with positive, finite luminance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LuminanceStats {
+    /// Pixels counted (positive, finite luminance, inside the mask).
+    pub count: u64,
+    /// Pixels inside the mask whose luminance is zero (or NaN/negative, treated as zero).
+    pub zero_count: u64,
+    /// Geometric mean `exp(mean(ln L))`, or 0 when `count == 0`.
+    pub log_average: f64,
+    /// Smallest positive luminance (0 when `count == 0`).
+    pub min: f64,
+    /// Largest finite luminance (0 when `count == 0`).
+    pub max: f64,
+    hist: Vec<u64>,
+}
+
+impl LuminanceStats {
+    /// The `p`-th percentile (`p` in percent, clamped to [0, 100]) of positive luminance,
+    /// resolved to 1/32 stop (≈2 %) and clamped to `[min, max]`; 0 when nothing was counted.
+    pub fn percentile(&self, p: f64) -> f64 {
+        if self.count == 0 {
+            return 0.0;
+        }
+        let p = if p.is_nan() { 50.0 } else { p.clamp(0.0, 100.0) };
+        let target = ((p / 100.0) * self.count as f64).ceil().max(1.0) as u64;
+        let mut acc = 0u64;
+        for (i, &n) in self.hist.iter().enumerate() {
+            acc += n;
+            if acc >= target {
+                let log2 = HIST_MIN_LOG2 + (i as f64 + 0.5) / HIST_BINS_PER_STOP;
+                return log2.exp2().clamp(self.min, self.max);
+            }
+        }
+        self.max
+    }
+
+    /// Counts per 1/32-stop bin of log₂ luminance, starting at 2⁻⁶⁴ (4096 bins; values outside
+    /// [2⁻⁶⁴, 2⁶⁴) are counted in the end bins).
+    pub fn log2_histogram(&self) -> &[u64] {
+        &self.hist
+    }
+
+    /// Dynamic range `log₂(max / min)` in stops (0 when fewer than one positive pixel).
+    pub fn dynamic_range_stops(&self) -> f64 {
+        if self.count == 0 || self.min <= 0.0 {
+            0.0
+        } else {
+            (self.max / self.min).log2()
+        }
+    }
+
+    /// `log₂(P_hi / P_lo)` between two percentiles, the range that survives a few hot or dead
+    /// pixels.
+    pub fn robust_range_stops(&self, lo: f64, hi: f64) -> f64 {
+        let (a, b) = (self.percentile(lo), self.percentile(hi));
+        if a > 0.0 && b > 0.0 {
+            (b / a).log2()
+        } else {
+            0.0
+        }
+    }
+}
+
+#[derive(Clone)]
+struct Acc {
+    count: u64,
+    inf: u64,
+    zero: u64,
+    sum_ln: f64,
+    min: f64,
+    max: f64,
+    hist: Vec<u64>,
+}
+
+impl Acc {
+    fn new() -> Self {
+        Self {
+            count: 0,
+            inf: 0,
+            zero: 0,
+            sum_ln: 0.0,
+            min: f64::INFINITY,
+            max: 0.0,
+            hist: vec![0; HIST_BINS],
+        }
+    }
+    fn add(&mut self, l: f32) {
+        if l > 0.0 && l.is_finite() {
+            let l = l as f64;
+            let ln = l.ln();
+            self.count += 1;
+            self.sum_ln += ln;
+            self.min = self.min.min(l);
+            self.max = self.max.max(l);
+            let bin = ((ln * std::f64::consts::LOG2_E - HIST_MIN_LOG2) * HIST_BINS_PER_STOP)
+                .clamp(0.0, (HIST_BINS - 1) as f64) as usize;
+            self.hist[bin] += 1;
+        } else if l == f32::INFINITY {
+            // Counted as the brightest possible value: it belongs at the top of the histogram,
+            // but must not poison the mean.
+            self.count += 1;
+            self.inf += 1;
+            self.hist[HIST_BINS - 1] += 1;
+        } else {
+            self.zero += 1;
+        }
+    }
+    fn merge(mut self, o: Acc) -> Acc {
+        self.count += o.count;
+        self.inf += o.inf;
+        self.zero += o.zero;
+        self.sum_ln += o.sum_ln;
+        self.min = self.min.min(o.min);
+        self.max = self.max.max(o.max);
+        for (a, b) in self.hist.iter_mut().zip(&o.hist) {
+            *a += b;
+        }
+        self
+    }
+}
+
+#[inline]
+fn sanitize(rgb: [f32; 3]) -> [f32; 3] {
+    // `max` drops NaN in favour of 0 and clamps negatives.
+    [rgb[0].max(0.0), rgb[1].max(0.0), rgb[2].max(0.0)]
+}
+
+fn check_image<T>(img: &RgbImage<T>) -> Result<(), TonemapError> {
+    let expected = img
+        .width
+        .checked_mul(img.height)
+        .and_then(|n| n.checked_mul(3));
+    if expected != Some(img.data.len()) {
+        return Err(TonemapError::BadBuffer {
+            width: img.width,
+            height: img.height,
+            len: img.data.len(),
+            expected: expected.unwrap_or(usize::MAX),
+        });
+    }
+    if img.width == 0 || img.height == 0 {
+        return Err(TonemapError::EmptyImage);
+    }
+    Ok(())
+}
+
+/// Row mask: the `[x0, x1)` span of row `y` inside the circle (the whole row without a mask).
+#[inline]
+pub(crate) fn row_span(mask: Option<&Circle>, width: usize, y: usize) -> (usize, usize) {
+    match mask {
+        None => (0, width),
+        Some(c) => {
+            let dy = y as f64 + 0.5 - c.cy;
+            let h2 = c.r * c.r - dy * dy;
+            if h2 < 0.0 {
+                return (0, 0);
+            }
+            let h = h2.sqrt();
+            // Pixel centres x + 0.5 within [cx - h, cx + h].
+            let x0 = (c.cx - h - 0.5).ceil().max(0.0);
+            let x1 = (c.cx + h - 0.5).floor() + 1.0;
+            let x0 = (x0 as usize).min(width);
+            let x1 = (x1.max(0.0) as usize).min(width);
+            (x0, x1.max(x0))
+        }
+    }
+}
+
+/// Luminance statistics of `img` over the pixels inside `mask` (all pixels when `None`).
+pub fn luminance_stats(
+    img: &HdrImage,
+    mask: Option<&Circle>,
+) -> Result<LuminanceStats, TonemapError> {
+    check_image(img)?;
+    let w = img.width;
+    let row_acc = |acc: &mut Acc, (y, row): (usize, &[f32])| {
+        let (x0, x1) = row_span(mask, w, y);
+        for px in row[3 * x0..3 * x1].chunks_exact(3) {
+            let rgb = [px[0], px[1], px[2]];
+            let l = if rgb.iter().any(|v| *v == f32::INFINITY) {
+                f32::INFINITY
+            } else {
+                luminance(sanitize(rgb))
+            };
+            acc.add(l);
+        }
+    };
+    #[cfg(feature = "parallel")]
+    let acc = {
+        // Bands of rows keep the per-thread histogram count small.
+        let band = (img.height / 16).max(1);
+        img.data
+            .par_chunks(3 * w * band)
+            .enumerate()
+            .map(|(b, chunk)| {
+                let mut acc = Acc::new();
+                for (i, row) in chunk.chunks_exact(3 * w).enumerate() {
+                    row_acc(&mut acc, (b * band + i, row));
+                }
+                acc
+            })
+            .reduce(Acc::new, Acc::merge)
+    };
+    #[cfg(not(feature = "parallel"))]
+    let acc = {
+        let mut acc = Acc::new();
+        for (y, row) in img.data.chunks_exact(3 * w).enumerate() {
+            row_acc(&mut acc, (y, row));
+        }
+        acc
+    };
+    Ok(finish(acc))
+}
+
+fn finish(acc: Acc) -> LuminanceStats {
+    let finite = acc.count - acc.inf;
+    LuminanceStats {
+        count: acc.count,
+        zero_count: acc.zero,
+        log_average: if finite > 0 {
+            (acc.sum_ln / finite as f64).exp()
+        } else {
+            0.0
+        },
+        min: if acc.count > 0 && acc.min.is_finite() {
+            acc.min
+        } else {
+            0.0
+        },
+        max: acc.max,
+        hist: acc.hist,
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// sRGB encoding
+// ---------------------------------------------------------------------------------------------
+
+/// The exact sRGB transfer function (IEC 61966-2-1), linear `[0, 1]` → encoded `[0, 1]`;
+/// inputs outside are clamped.
+#[inline]
+pub fn srgb_encode(x: f32) -> f32 {
+    let x = x.clamp(0.0, 1.0);
+    if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// The inverse of [`srgb_encode`]: encoded `[0, 1]` → linear `[0, 1]`.
+#[inline]
+pub fn srgb_decode(v: f32) -> f32 {
+    let v = v.clamp(0.0, 1.0);
+    if v <= 0.040_45 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+const LUT_SIZE: usize = 4096;
+
+fn srgb_lut() -> &'static [f32; LUT_SIZE + 1] {
+    static LUT: OnceLock<Box<[f32; LUT_SIZE + 1]>> = OnceLock::new();
+    LUT.get_or_init(|| {
+        let mut t = Box::new([0.0f32; LUT_SIZE + 1]);
+        for (i, v) in t.iter_mut().enumerate() {
+            *v = srgb_encode(i as f32 / LUT_SIZE as f32);
+        }
+        t
+    })
+}
+
+#[inline]
+fn srgb_fast(lut: &[f32; LUT_SIZE + 1], x: f32) -> f32 {
+    let f = x.clamp(0.0, 1.0) * LUT_SIZE as f32;
+    let i = (f as usize).min(LUT_SIZE - 1);
+    let t = f - i as f32;
+    lut[i] + (lut[i + 1] - lut[i]) * t
+}
+
+// ---------------------------------------------------------------------------------------------
+// The per-pixel curve
+// ---------------------------------------------------------------------------------------------
+
+/// A tone-mapping curve resolved against one image's statistics: everything per-pixel code needs.
+#[derive(Debug, Clone, Copy)]
+struct Curve {
+    op: Operator,
+    /// Exposure factor `k`.
+    k: f32,
+    /// Reinhard `1 / Lw²`.
+    inv_white2: f32,
+    /// Drago `1 / Lmax`, `1 / log10(Lmax + 1)`, `ln b / ln 0.5`.
+    inv_lmax: f32,
+    drago_scale: f32,
+    drago_exp: f32,
+}
+
+impl Curve {
+    fn new(tm: &ToneMap, stats: &LuminanceStats) -> Result<Self, TonemapError> {
+        let k = match tm.exposure {
+            ExposureMode::Ev(ev) => ev.exp2(),
+            ExposureMode::Auto => {
+                if stats.log_average <= 0.0 {
+                    return Err(TonemapError::NothingToExpose);
+                }
+                tm.key / stats.log_average
+            }
+        };
+        // A white point below the key would invert the meaning of the curve; keep it ≥ 1.
+        let pct = (k * stats.percentile(tm.white_percentile)).max(1.0);
+        let white = tm.reinhard_white.unwrap_or(pct);
+        let lmax = pct;
+        Ok(Self {
+            op: tm.operator,
+            k: k as f32,
+            inv_white2: (1.0 / (white * white)) as f32,
+            inv_lmax: (1.0 / lmax) as f32,
+            drago_scale: (1.0 / (lmax + 1.0).log10()) as f32,
+            drago_exp: (tm.drago_bias.ln() / 0.5f64.ln()) as f32,
+        })
+    }
+
+    /// Scaled luminance → display luminance.
+    #[inline]
+    fn compress(&self, ls: f32) -> f32 {
+        match self.op {
+            Operator::Linear | Operator::MinMax => ls,
+            Operator::Reinhard => ls * (1.0 + ls * self.inv_white2) / (1.0 + ls),
+            Operator::Drago => {
+                let r = (ls * self.inv_lmax).min(1.0);
+                self.drago_scale * ls.ln_1p() / (2.0 + 8.0 * r.powf(self.drago_exp)).ln()
+            }
+            Operator::Aces => {
+                let x = ls;
+                x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14)
+            }
+        }
+    }
+
+    /// Linear scene RGB → display-linear RGB in `[0, 1]`, keeping hue (module docs, step 3).
+    #[inline]
+    fn map(&self, rgb: [f32; 3]) -> [f32; 3] {
+        if rgb.iter().any(|v| *v == f32::INFINITY) {
+            return [1.0; 3];
+        }
+        let rgb = sanitize(rgb);
+        let l = luminance(rgb);
+        if l <= 0.0 {
+            return [0.0; 3];
+        }
+        let ld = self.compress(self.k * l);
+        if !(ld < 1.0) {
+            return [1.0; 3];
+        }
+        let s = ld / l;
+        let mut out = [rgb[0] * s, rgb[1] * s, rgb[2] * s];
+        let m = out[0].max(out[1]).max(out[2]);
+        if m > 1.0 {
+            let t = (1.0 - ld) / (m - ld);
+            for c in &mut out {
+                *c = ld + (*c - ld) * t;
+            }
+        }
+        out
+    }
+}
+
+/// Display-linear tone mapping: the curve and hue handling of [`tonemap_u8`] without the sRGB
+/// encoding and quantisation, values in `[0, 1]`. Useful to composite before encoding.
+/// `minmax` returns its per-channel stretch in `[0, 1]`.
+pub fn tonemap_display(img: &HdrImage, tm: &ToneMap) -> Result<HdrImage, TonemapError> {
+    if tm.operator == Operator::MinMax {
+        let (lo, hi) = channel_range(img, tm)?;
+        return map_rows(img, tm.mask.as_ref(), |rgb, _, _| {
+            minmax_unit(rgb, &lo, &hi)
+        });
+    }
+    let curve = prepare(img, tm)?;
+    map_rows(img, tm.mask.as_ref(), |rgb, _, _| curve.map(rgb))
+}
+
+fn prepare(img: &HdrImage, tm: &ToneMap) -> Result<Curve, TonemapError> {
+    tm.validate()?;
+    let stats = luminance_stats(img, tm.mask.as_ref())?;
+    Curve::new(tm, &stats)
+}
+
+// ---------------------------------------------------------------------------------------------
+// minmax
+// ---------------------------------------------------------------------------------------------
+
+fn channel_range(img: &HdrImage, tm: &ToneMap) -> Result<([f32; 3], [f32; 3]), TonemapError> {
+    tm.validate()?;
+    check_image(img)?;
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for (y, row) in img.data.chunks_exact(3 * img.width).enumerate() {
+        let (x0, x1) = row_span(tm.mask.as_ref(), img.width, y);
+        for px in row[3 * x0..3 * x1].chunks_exact(3) {
+            for c in 0..3 {
+                if px[c].is_finite() {
+                    lo[c] = lo[c].min(px[c]);
+                    hi[c] = hi[c].max(px[c]);
+                }
+            }
+        }
+    }
+    Ok((lo, hi))
+}
+
+#[inline]
+fn minmax_unit(rgb: [f32; 3], lo: &[f32; 3], hi: &[f32; 3]) -> [f32; 3] {
+    let mut o = [0.0; 3];
+    for c in 0..3 {
+        let span = hi[c] - lo[c];
+        o[c] = if span > 0.0 && rgb[c].is_finite() {
+            ((rgb[c] - lo[c]) / span).clamp(0.0, 1.0)
+        } else if rgb[c] == f32::INFINITY {
+            1.0
+        } else {
+            0.0
+        };
+    }
+    o
+}
+
+// ---------------------------------------------------------------------------------------------
+// Row driver and quantisation
+// ---------------------------------------------------------------------------------------------
+
+/// Runs `f(rgb, x, y)` over every pixel inside the mask, writing 3 outputs per pixel; pixels
+/// outside stay `T::default()`.
+fn map_rows<T, F>(img: &HdrImage, mask: Option<&Circle>, f: F) -> Result<RgbImage<T>, TonemapError>
+where
+    T: Copy + Default + Send + From3,
+    F: Fn([f32; 3], usize, usize) -> T::Triple + Sync,
+{
+    check_image(img)?;
+    let w = img.width;
+    let mut out = RgbImage::<T>::new(w, img.height);
+    let row_fn = |(y, (orow, irow)): (usize, (&mut [T], &[f32]))| {
+        let (x0, x1) = row_span(mask, w, y);
+        for x in x0..x1 {
+            let i = 3 * x;
+            let v = f([irow[i], irow[i + 1], irow[i + 2]], x, y);
+            T::store(&mut orow[i..i + 3], v);
+        }
+    };
+    #[cfg(feature = "parallel")]
+    out.data
+        .par_chunks_mut(3 * w)
+        .zip(img.data.par_chunks(3 * w))
+        .enumerate()
+        .for_each(row_fn);
+    #[cfg(not(feature = "parallel"))]
+    out.data
+        .chunks_mut(3 * w)
+        .zip(img.data.chunks(3 * w))
+        .enumerate()
+        .for_each(row_fn);
+    Ok(out)
+}
+
+/// Output sample types of [`map_rows`]: the closure returns a triple of them.
+trait From3: Sized {
+    type Triple;
+    fn store(dst: &mut [Self], v: Self::Triple);
+}
+impl From3 for u8 {
+    type Triple = [u8; 3];
+    #[inline]
+    fn store(dst: &mut [u8], v: [u8; 3]) {
+        dst.copy_from_slice(&v);
+    }
+}
+impl From3 for u16 {
+    type Triple = [u16; 3];
+    #[inline]
+    fn store(dst: &mut [u16], v: [u16; 3]) {
+        dst.copy_from_slice(&v);
+    }
+}
+impl From3 for f32 {
+    type Triple = [f32; 3];
+    #[inline]
+    fn store(dst: &mut [f32], v: [f32; 3]) {
+        dst.copy_from_slice(&v);
+    }
+}
+
+const BAYER8: [[u8; 8]; 8] = [
+    [0, 32, 8, 40, 2, 34, 10, 42],
+    [48, 16, 56, 24, 50, 18, 58, 26],
+    [12, 44, 4, 36, 14, 46, 6, 38],
+    [60, 28, 52, 20, 62, 30, 54, 22],
+    [3, 35, 11, 43, 1, 33, 9, 41],
+    [51, 19, 59, 27, 49, 17, 57, 25],
+    [15, 47, 7, 39, 13, 45, 5, 37],
+    [63, 31, 55, 23, 61, 29, 53, 21],
+];
+
+/// SplitMix64 finaliser: a well-mixed hash for reproducible per-pixel noise.
+#[inline]
+fn mix64(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Dither offsets in `[-0.5, 0.5)` code values for the three channels of pixel `(x, y)`.
+#[inline]
+fn dither_offsets(d: Dither, x: usize, y: usize) -> [f32; 3] {
+    match d {
+        Dither::None => [0.0; 3],
+        Dither::Ordered => {
+            // One threshold for all three channels: channel-independent patterns would add
+            // chroma noise to neutral greys.
+            let t = (BAYER8[y & 7][x & 7] as f32 + 0.5) / 64.0 - 0.5;
+            [t; 3]
+        }
+        Dither::Noise { seed } => {
+            let h = mix64(seed ^ mix64(((y as u64) << 32) ^ x as u64));
+            let f = |s: u32| ((h >> s) & 0xffff) as f32 / 65536.0 - 0.5;
+            [f(0), f(16), f(32)]
+        }
+    }
+}
+
+/// Tone-maps to 8-bit sRGB (or, for `minmax`, the seed's linear stretch), with dithering.
+///
+/// Pixels outside `tm.mask` and pixels that are exactly zero stay `(0, 0, 0)`.
+pub fn tonemap_u8(img: &HdrImage, tm: &ToneMap) -> Result<RgbImage<u8>, TonemapError> {
+    if tm.operator == Operator::MinMax {
+        let (lo, hi) = channel_range(img, tm)?;
+        return map_rows(img, tm.mask.as_ref(), |rgb, _, _| {
+            let u = minmax_unit(rgb, &lo, &hi);
+            u.map(|v| (v * 255.0).round() as u8)
+        });
+    }
+    let curve = prepare(img, tm)?;
+    let lut = srgb_lut();
+    let dither = tm.dither;
+    map_rows(img, tm.mask.as_ref(), |rgb, x, y| {
+        let d = curve.map(rgb);
+        if d == [0.0; 3] {
+            return [0; 3];
+        }
+        let off = dither_offsets(dither, x, y);
+        let q = |c: usize| (srgb_fast(lut, d[c]) * 255.0 + 0.5 + off[c]).clamp(0.0, 255.0) as u8;
+        [q(0), q(1), q(2)]
+    })
+}
+
+/// Tone-maps to 16-bit sRGB-encoded samples (no dither: 16 bits do not band). `minmax` gives
+/// its linear stretch scaled to 0..=65535.
+pub fn tonemap_u16(img: &HdrImage, tm: &ToneMap) -> Result<RgbImage<u16>, TonemapError> {
+    if tm.operator == Operator::MinMax {
+        let (lo, hi) = channel_range(img, tm)?;
+        return map_rows(img, tm.mask.as_ref(), |rgb, _, _| {
+            minmax_unit(rgb, &lo, &hi).map(|v| (v * 65535.0).round() as u16)
+        });
+    }
+    let curve = prepare(img, tm)?;
+    let lut = srgb_lut();
+    map_rows(img, tm.mask.as_ref(), |rgb, _, _| {
+        curve
+            .map(rgb)
+            .map(|v| (srgb_fast(lut, v) * 65535.0).round() as u16)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_lut_matches_exact_curve_to_one_16bit_code() {
+        let lut = srgb_lut();
+        let mut worst = 0.0f32;
+        for i in 0..=100_000 {
+            let x = i as f32 / 100_000.0;
+            worst = worst.max((srgb_fast(lut, x) - srgb_encode(x)).abs());
+        }
+        assert!(worst * 65535.0 < 1.5, "worst LUT error {worst}");
+    }
+
+    #[test]
+    fn mask_row_span_matches_contains_pixel() {
+        let c = Circle {
+            cx: 10.3,
+            cy: 7.9,
+            r: 6.2,
+        };
+        for y in 0..20 {
+            let (x0, x1) = row_span(Some(&c), 25, y);
+            for x in 0..25 {
+                assert_eq!((x0..x1).contains(&x), c.contains_pixel(x, y), "({x},{y})");
+            }
+        }
+    }
+
+    #[test]
+    fn percentile_resolves_to_a_thirty_second_of_a_stop() {
+        let data: Vec<f32> = (1..=1000)
+            .flat_map(|i| {
+                let v = i as f32;
+                [v, v, v]
+            })
+            .collect();
+        let img = HdrImage::from_vec(1000, 1, data).unwrap();
+        let s = luminance_stats(&img, None).unwrap();
+        let p = s.percentile(50.0);
+        assert!((p / 500.0 - 1.0).abs() < 0.025, "median {p}");
+        assert_eq!(s.count, 1000);
+        assert!((s.max - 1000.0).abs() < 1e-3 && (s.min - 1.0).abs() < 1e-6);
+    }
+}
