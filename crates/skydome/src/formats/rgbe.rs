@@ -383,7 +383,8 @@ pub(crate) fn validate_meta(meta: &HdrMeta, width: usize, height: usize) -> Resu
         if let Some(v) = v {
             if !is_exif_datetime(v) {
                 return Err(format!(
-                    "{name} must be formatted YYYY:MM:DD HH:MM:SS, got `{v}`"
+                    "{name} must be formatted YYYY:MM:DD HH:MM:SS, got `{}`",
+                    v.escape_debug()
                 ));
             }
         }
@@ -392,7 +393,8 @@ pub(crate) fn validate_meta(meta: &HdrMeta, width: usize, height: usize) -> Resu
         if let Some(v) = v {
             if v.is_empty() || v.trim() != v || v.contains(['\n', '\r']) {
                 return Err(format!(
-                    "{name} must be one non-empty line without leading or trailing spaces, got `{v}`"
+                    "{name} must be one non-empty line without leading or trailing spaces, got `{}`",
+                    v.escape_debug()
                 ));
             }
         }
@@ -441,7 +443,8 @@ pub(crate) fn validate_meta(meta: &HdrMeta, width: usize, height: usize) -> Resu
             Line::SunDirection(..) if meta.sun.is_none() => {}
             _ => {
                 return Err(format!(
-                    "extra header line `{line}` would be read back as a structured field; set the matching HdrMeta field instead"
+                    "extra header line `{}` would be read back as a structured field; set the matching HdrMeta field instead",
+                    line.escape_debug()
                 ))
             }
         }
@@ -618,6 +621,10 @@ fn parse_sun_direction(s: &str) -> Option<(Option<f64>, Option<f64>)> {
     let mut el = None;
     let mut it = s.split_whitespace();
     while let Some(tok) = it.next() {
+        if tok.starts_with('(') {
+            // The trailing explanation `(degrees, azimuth from north towards east)`.
+            break;
+        }
         let slot = match tok {
             "azimuth" => &mut az,
             "elevation" => &mut el,
