@@ -27,7 +27,8 @@
 //! - **Mirror sphere** (reflectance `k`): the reflected view ray looks up the map directly
 //!   (bilinear, wrapping in azimuth), so the sun appears where the dome has it; rays that hit the
 //!   ground or the other sphere shade those instead.
-//! - **Ground plane** (z = 0, albedo ρ_g): `ρ_g/π · E(up)`, minus the skylight the spheres block
+//! - **Ground plane** (z = 0, albedo ρ_g): `ρ_g/π · E(up)` with `E(up) = Σ L · max(z, 0) · dω`
+//!   integrated exactly (not from the SH fit, whose error near a sun exceeds the skylight), minus the skylight the spheres block
 //!   (a cap of half-angle `asin(r/d)` seen from the ground point) and minus the sun's direct
 //!   irradiance where a sphere casts its shadow. The "sun" is taken as the pixels within half the
 //!   brightness of the map's brightest pixel, when that pixel is ≥ 100 × the median sky.
@@ -233,6 +234,8 @@ pub struct ShIrradiance {
 struct ShAcc {
     c: [[f64; 3]; 9],
     hole: [f64; 9],
+    /// Exact irradiance on an upward-facing surface, `Σ L · max(z, 0) · dω`.
+    up: [f64; 3],
 }
 
 impl ShAcc {
@@ -240,6 +243,7 @@ impl ShAcc {
         Self {
             c: [[0.0; 3]; 9],
             hole: [0.0; 9],
+            up: [0.0; 3],
         }
     }
     fn merge(mut self, o: ShAcc) -> ShAcc {
@@ -248,6 +252,9 @@ impl ShAcc {
                 self.c[i][k] += o.c[i][k];
             }
             self.hole[i] += o.hole[i];
+        }
+        for k in 0..3 {
+            self.up[k] += o.up[k];
         }
         self
     }
@@ -283,6 +290,11 @@ fn project_sh(env: &HdrImage) -> ShAcc {
             for i in 0..9 {
                 for k in 0..3 {
                     acc.c[i][k] += p[k] as f64 * b[i] * domega;
+                }
+            }
+            if d[2] > 0.0 {
+                for k in 0..3 {
+                    acc.up[k] += p[k] as f64 * d[2] * domega;
                 }
             }
         }
@@ -665,8 +677,9 @@ pub fn render_spheres_hdr(env: &HdrImage, scene: &SphereScene) -> Result<HdrImag
     check_env(env)?;
     scene.validate()?;
     let acc = project_sh(env);
-    let sky_sh = ShIrradiance { coeffs: acc.c };
-    let e_up = sky_sh.irradiance([0.0, 0.0, 1.0]);
+    // The ground uses the exact integral: the SH fit of a sun is off by up to 10 % of the sun's
+    // power, more than the whole skylight, which would turn shadows black.
+    let e_up = acc.up;
     if luminance(e_up.map(|v| v as f32)) <= 0.0 {
         return Err(RenderError::Dark);
     }
