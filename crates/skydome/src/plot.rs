@@ -326,10 +326,10 @@ pub fn encode_png_rgb8(img: &RgbImage<u8>) -> Result<Vec<u8>, PlotError> {
     )
 }
 
-/// Encodes a 16-bit RGB image as PNG bytes (PNG stores 16-bit samples big-endian; the
-/// conversion is done here).
+/// Encodes a 16-bit RGB image as PNG bytes.
 pub fn encode_png_rgb16(img: &RgbImage<u16>) -> Result<Vec<u8>, PlotError> {
-    let bytes: Vec<u8> = img.data.iter().flat_map(|v| v.to_be_bytes()).collect();
+    // The `image` encoder takes native-endian samples and writes PNG's big-endian itself.
+    let bytes: Vec<u8> = img.data.iter().flat_map(|v| v.to_ne_bytes()).collect();
     encode_png(&bytes, img.width, img.height, image::ExtendedColorType::Rgb16)
 }
 

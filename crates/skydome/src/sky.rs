@@ -39,8 +39,8 @@
 //!   inside the dome; pixels above half-way between them form 8-connected blobs; the blob with
 //!   the most energy above the threshold wins and its centroid (weighted by unblurred luminance
 //!   above background) is the sun. Confidence = compactness (area over the area of the smallest
-//!   centred disc holding it) × size (1 up to an equivalent radius of 5 % of the dome radius,
-//!   0 from 15 %) × contrast (`log10(peak/background)/2`, capped at 1) × ambiguity
+//!   centred disc holding it) × size (1 up to an equivalent radius of 8 % of the dome radius,
+//!   0 from 20 %: glare around a clipped sun in an 8-bit frame grows well past the 0.53° disc) × contrast (`log10(peak/background)/2`, capped at 1) × ambiguity
 //!   (`1 − runner-up energy / winner energy`). `None` when the peak is less than twice the
 //!   background or the confidence is below 0.15 — an overcast sky or a sun behind a building
 //!   has no compact outstanding blob.
@@ -608,7 +608,7 @@ pub fn detect_sun_luma(
     let area = members.len() as f64;
     let compactness = (area / (std::f64::consts::PI * rmax * rmax)).min(1.0);
     let r_eq = (area / std::f64::consts::PI).sqrt() / region.r;
-    let size = ((0.15 - r_eq) / 0.10).clamp(0.0, 1.0);
+    let size = ((0.20 - r_eq) / 0.12).clamp(0.0, 1.0);
     let contrast = (ratio.log10() / 2.0).clamp(0.0, 1.0);
     let ambiguity = 1.0 - (runner_up / best_energy).clamp(0.0, 1.0);
     let confidence = compactness * size * contrast * ambiguity;

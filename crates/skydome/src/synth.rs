@@ -1,1 +1,406 @@
-//! synth (in progress).
+//! Synthetic fish-eye brackets with known answers, for tests, benchmarks and demos.
+//!
+//! [`generate`] renders a radiance map whose every value is known, photographs it with a
+//! simulated camera whose response is known, and returns both:
+//!
+//! 1. **Scene** ([`scene`]): an equidistant fish-eye of a 235° lens (zenith angle
+//!    `θ = 117.5° · r / R` inside the image circle of radius `R`, centred; black housing —
+//!    radiance 0 — outside). Above the horizon a blue sky brightening towards the horizon and
+//!    around the sun, fractal clouds (seeded value noise), and a sun disc of radius 2.5° with
+//!    radiance 2¹¹ (far above what any default exposure holds); below the horizon dim ground
+//!    (≈ 2⁻⁶) with darker "tree" silhouettes (≈ 2⁻⁸). About 19 stops inside the circle.
+//!    Radiance is relative: a clear zenith is ≈ 0.5–1.
+//! 2. **Sensor**: normalised exposure `X = L · Δt · k` with `k = 0.25 / base_time_s`
+//!    (EV 0 puts the zenith sky at `X ≈ 0.2`), then photon shot noise (Gaussian with variance
+//!    `X · full_well` electrons) and read noise (`read_noise` electrons r.m.s.), clipping to
+//!    `[0, 1]`.
+//! 3. **Response** ([`Crf`]): `I = f(X) = X^p (1 + s) / (X^p + s)` with `p = 1/γ` — a gamma
+//!    curve with a soft shoulder, `f(0) = 0`, `f(1) = 1` — with different `(γ, s)` per channel;
+//!    then 8-bit quantisation `Z = round(255 · I)` and optional JPEG compression (the `image`
+//!    crate's encoder and decoder, 4:2:0 chroma).
+//!
+//! The true log-inverse response is `g(z) = ln f⁻¹(max(z, ½) / 255)` ([`Crf::g`]); a recovered
+//! curve equals it up to an additive constant (the gauge), which comparisons remove.
+//!
+//! Everything random is drawn from [`SplitMix64`] with the given seed, so a seed always gives
+//! the same bracket.
+
+use crate::bracket::{Exposure, Frame, Pixels};
+use crate::image::{Circle, HdrImage};
+use crate::sampling::SplitMix64;
+
+/// Errors from the generator.
+#[derive(Debug, thiserror::Error)]
+pub enum SynthError {
+    /// A parameter is out of range.
+    #[error("invalid synthetic bracket option: {0}")]
+    BadOption(String),
+    /// The JPEG round trip failed.
+    #[error("JPEG round trip failed: {0} (try jpeg_quality = None)")]
+    Jpeg(String),
+}
+
+/// A camera response `I = X^p (1 + s) / (X^p + s)`, `p = 1/γ`, mapping normalised exposure
+/// `X ∈ [0, 1]` to normalised intensity `I ∈ [0, 1]`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Crf {
+    /// Gamma γ (> 0).
+    pub gamma: f64,
+    /// Shoulder `s` (> 0; smaller = stronger roll-off near white).
+    pub shoulder: f64,
+}
+
+impl Crf {
+    /// `f(X)`.
+    pub fn forward(&self, x: f64) -> f64 {
+        let xp = x.max(0.0).powf(1.0 / self.gamma);
+        xp * (1.0 + self.shoulder) / (xp + self.shoulder)
+    }
+
+    /// `f⁻¹(I)` for `I ∈ [0, 1]`.
+    pub fn inverse(&self, i: f64) -> f64 {
+        let i = i.clamp(0.0, 1.0);
+        (i * self.shoulder / (1.0 + self.shoulder - i)).powf(self.gamma)
+    }
+
+    /// The true `g(z) = ln f⁻¹(max(z, ½) / 255)` for the 256 codes.
+    pub fn g(&self) -> Vec<f64> {
+        (0..256)
+            .map(|z| self.inverse((z as f64).max(0.5) / 255.0).ln())
+            .collect()
+    }
+}
+
+/// Generator options.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SynthOptions {
+    /// Width in pixels (16..=16384).
+    pub width: usize,
+    /// Height in pixels (16..=16384).
+    pub height: usize,
+    /// Exposure values of the frames relative to `base_time_s` (`Δt = base · 2^EV`); sorted
+    /// ascending in the output.
+    pub evs: Vec<f64>,
+    /// Shutter time of EV 0, seconds.
+    pub base_time_s: f64,
+    /// Seed for clouds and noise.
+    pub seed: u64,
+    /// Render a fish-eye circle (black housing outside) instead of filling the frame.
+    pub fisheye: bool,
+    /// JPEG quality 1..=100, or `None` for lossless 8-bit frames.
+    pub jpeg_quality: Option<u8>,
+    /// Full-well capacity in electrons (> 0): `X = 1` collects this many.
+    pub full_well: f64,
+    /// Add photon shot noise (variance = electrons collected).
+    pub shot_noise: bool,
+    /// Read noise in electrons r.m.s.; 0 disables it.
+    pub read_noise: f64,
+    /// Per-channel responses (R, G, B).
+    pub crf: [Crf; 3],
+}
+
+impl Default for SynthOptions {
+    /// 512 × 512 fish-eye, EV −2, 0, +2 around 1/250 s, seed 1, JPEG quality 92, a phone-like
+    /// sensor (full well 4000 e⁻, read noise 3 e⁻), γ = 2.0 / 2.2 / 2.5 with shoulders
+    /// 0.5 / 0.8 / 1.2.
+    fn default() -> Self {
+        Self {
+            width: 512,
+            height: 512,
+            evs: vec![-2.0, 0.0, 2.0],
+            base_time_s: 1.0 / 250.0,
+            seed: 1,
+            fisheye: true,
+            jpeg_quality: Some(92),
+            full_well: 4000.0,
+            shot_noise: true,
+            read_noise: 3.0,
+            crf: [
+                Crf {
+                    gamma: 2.0,
+                    shoulder: 0.5,
+                },
+                Crf {
+                    gamma: 2.2,
+                    shoulder: 0.8,
+                },
+                Crf {
+                    gamma: 2.5,
+                    shoulder: 1.2,
+                },
+            ],
+        }
+    }
+}
+
+/// A generated bracket and its ground truth.
+#[derive(Debug, Clone)]
+pub struct SynthBracket {
+    /// True radiance (relative units; 0 outside the circle).
+    pub truth: HdrImage,
+    /// The frames, shortest exposure first.
+    pub frames: Vec<Frame>,
+    /// The true `g` per channel ([`Crf::g`]), up to the gauge constant.
+    pub true_g: [Vec<f64>; 3],
+    /// The image circle, when `fisheye`.
+    pub circle: Option<Circle>,
+    /// `k` in `X = L · Δt · k`.
+    pub exposure_scale: f64,
+}
+
+/// Radiance of the sun disc relative to the zenith sky.
+pub const SUN_RADIANCE: f32 = 2048.0;
+
+fn check(opts: &SynthOptions) -> Result<(), SynthError> {
+    let bad = |m: String| Err(SynthError::BadOption(m));
+    if !(16..=16384).contains(&opts.width) || !(16..=16384).contains(&opts.height) {
+        return bad(format!(
+            "size {}x{} (use 16..=16384 per side)",
+            opts.width, opts.height
+        ));
+    }
+    if opts.evs.is_empty()
+        || opts.evs.len() > 32
+        || opts.evs.iter().any(|e| !e.is_finite() || e.abs() > 20.0)
+    {
+        return bad("evs must hold 1..=32 finite values within ±20".into());
+    }
+    let mut e = opts.evs.clone();
+    e.sort_by(f64::total_cmp);
+    if e.windows(2).any(|w| w[1] - w[0] < 1e-6) {
+        return bad("evs must be distinct".into());
+    }
+    if !(opts.base_time_s.is_finite() && opts.base_time_s > 0.0) {
+        return bad(format!(
+            "base_time_s = {} (use a positive time)",
+            opts.base_time_s
+        ));
+    }
+    if matches!(opts.jpeg_quality, Some(q) if q == 0 || q > 100) {
+        return bad("jpeg_quality must be 1..=100".into());
+    }
+    if !(opts.full_well.is_finite() && opts.full_well >= 1.0)
+        || !(opts.read_noise.is_finite() && opts.read_noise >= 0.0)
+    {
+        return bad(
+            "full_well must be >= 1 electron and read_noise finite and non-negative".into(),
+        );
+    }
+    for c in &opts.crf {
+        if !(c.gamma.is_finite()
+            && c.gamma > 0.05
+            && c.gamma < 20.0
+            && c.shoulder.is_finite()
+            && c.shoulder > 0.0)
+        {
+            return bad(format!(
+                "response {c:?} (use 0.05 < gamma < 20, shoulder > 0)"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Renders the bracket. See the module docs for the model.
+pub fn generate(opts: &SynthOptions) -> Result<SynthBracket, SynthError> {
+    check(opts)?;
+    let (w, h) = (opts.width, opts.height);
+    let circle = opts.fisheye.then(|| Circle {
+        cx: w as f64 / 2.0,
+        cy: h as f64 / 2.0,
+        r: 0.48 * w.min(h) as f64,
+    });
+    let truth = scene(w, h, opts.seed, circle);
+    let k = 0.25 / opts.base_time_s;
+    let mut evs = opts.evs.clone();
+    evs.sort_by(f64::total_cmp);
+    let mut rng = SplitMix64::new(opts.seed ^ 0x5EED_0F_C0FFEE);
+    let mut frames = Vec::with_capacity(evs.len());
+    for ev in evs {
+        let t = opts.base_time_s * ev.exp2();
+        let gain = t * k;
+        let mut codes = Vec::with_capacity(truth.data.len());
+        for (i, &l) in truth.data.iter().enumerate() {
+            let x = l as f64 * gain;
+            let mut e = x * opts.full_well;
+            let shot = if opts.shot_noise { e.max(0.0) } else { 0.0 };
+            let var = shot + opts.read_noise * opts.read_noise;
+            if var > 0.0 {
+                e += var.sqrt() * rng.normal();
+            }
+            let xn = e / opts.full_well;
+            let v = opts.crf[i % 3].forward(xn.clamp(0.0, 1.0));
+            codes.push((255.0 * v).round().clamp(0.0, 255.0) as u8);
+        }
+        let (codes, ext) = match opts.jpeg_quality {
+            Some(q) => (jpeg_round_trip(&codes, w, h, q)?, "jpg"),
+            None => (codes, "png"),
+        };
+        frames.push(Frame {
+            name: format!("synth_ev{ev:+}.{ext}"),
+            width: w,
+            height: h,
+            pixels: Pixels::U8(codes),
+            exposure: Exposure {
+                time_s: t,
+                iso: None,
+                f_number: None,
+            },
+        });
+    }
+    Ok(SynthBracket {
+        truth,
+        frames,
+        true_g: [opts.crf[0].g(), opts.crf[1].g(), opts.crf[2].g()],
+        circle,
+        exposure_scale: k,
+    })
+}
+
+/// JPEG-encodes 8-bit RGB at quality `q` and decodes it again.
+pub fn jpeg_round_trip(rgb: &[u8], w: usize, h: usize, q: u8) -> Result<Vec<u8>, SynthError> {
+    let (wu, hu) = (
+        u32::try_from(w).map_err(|e| SynthError::Jpeg(e.to_string()))?,
+        u32::try_from(h).map_err(|e| SynthError::Jpeg(e.to_string()))?,
+    );
+    let mut buf = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, q)
+        .encode(rgb, wu, hu, image::ExtendedColorType::Rgb8)
+        .map_err(|e| SynthError::Jpeg(e.to_string()))?;
+    let img = image::load_from_memory_with_format(&buf, image::ImageFormat::Jpeg)
+        .map_err(|e| SynthError::Jpeg(e.to_string()))?;
+    Ok(img.to_rgb8().into_raw())
+}
+
+/// Hash-based lattice value in `[0, 1)`.
+fn lattice(seed: u64, x: i64, y: i64) -> f64 {
+    let mut r = SplitMix64::new(
+        seed ^ (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F),
+    );
+    r.next_f64()
+}
+
+/// Smooth value noise, 5 octaves, roughly in `[0, 1]`.
+fn fbm(seed: u64, x: f64, y: f64) -> f64 {
+    let (mut sum, mut amp, mut freq, mut norm) = (0.0, 1.0, 1.0, 0.0);
+    for o in 0..5u64 {
+        let (px, py) = (x * freq, y * freq);
+        let (x0, y0) = (px.floor(), py.floor());
+        let (fx, fy) = (px - x0, py - y0);
+        let (sx, sy) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
+        let s = seed.wrapping_add(o * 7919);
+        let (xi, yi) = (x0 as i64, y0 as i64);
+        let a = lattice(s, xi, yi);
+        let b = lattice(s, xi + 1, yi);
+        let c = lattice(s, xi, yi + 1);
+        let d = lattice(s, xi + 1, yi + 1);
+        let v = a + (b - a) * sx + (c - a) * sy + (a - b - c + d) * sx * sy;
+        sum += amp * v;
+        norm += amp;
+        amp *= 0.5;
+        freq *= 2.0;
+    }
+    sum / norm
+}
+
+/// The true radiance map (see the module docs). With `circle = None` the projection still uses
+/// the frame's inscribed circle, but every pixel is scene: the corners, beyond 117.5°, are ground.
+pub fn scene(width: usize, height: usize, seed: u64, circle: Option<Circle>) -> HdrImage {
+    let mut img = HdrImage::new(width, height);
+    let c = circle.unwrap_or(Circle {
+        cx: width as f64 / 2.0,
+        cy: height as f64 / 2.0,
+        r: 0.5 * width.min(height) as f64,
+    });
+    let deg = std::f64::consts::PI / 180.0;
+    let max_theta = 117.5 * deg;
+    // Sun at zenith angle 45°, image direction up-left (azimuth is not the point here).
+    let (sun_theta, sun_phi) = (45.0 * deg, 2.3f64);
+    let sun = [
+        sun_theta.sin() * sun_phi.cos(),
+        sun_theta.sin() * sun_phi.sin(),
+        sun_theta.cos(),
+    ];
+    let sun_r = 2.5 * deg;
+    for y in 0..height {
+        for x in 0..width {
+            if circle.is_some() && !c.contains_pixel(x, y) {
+                continue;
+            }
+            let dx = (x as f64 + 0.5 - c.cx) / c.r;
+            let dy = (y as f64 + 0.5 - c.cy) / c.r;
+            let rho = (dx * dx + dy * dy).sqrt();
+            let theta = rho * max_theta;
+            let phi = dy.atan2(dx);
+            let dir = [
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            ];
+            let cos_g = (dir[0] * sun[0] + dir[1] * sun[1] + dir[2] * sun[2]).clamp(-1.0, 1.0);
+            let gamma = cos_g.acos();
+            let rgb: [f64; 3] = if theta > 90.0 * deg {
+                // Ground: dim, with tree silhouettes along some azimuths near the horizon.
+                let trees = fbm(seed ^ 0x7EE5, phi * 3.0 + 10.0, 0.5) > 0.55 && theta < 100.0 * deg;
+                let base = if trees { 0.004 } else { 0.016 };
+                let tex = 0.7 + 0.6 * fbm(seed ^ 0x6404, dx * 20.0 + 5.0, dy * 20.0 + 5.0);
+                [base * tex * 1.1, base * tex, base * tex * 0.8]
+            } else if gamma < sun_r {
+                [SUN_RADIANCE as f64; 3]
+            } else {
+                let horizon = 1.0 + 1.5 * (theta / (90.0 * deg)).powi(4);
+                let aureole = 1.0 + 8.0 * (-gamma / (6.0 * deg)).exp() + 0.5 * cos_g * cos_g;
+                let l = 0.5 * horizon * aureole;
+                let white = ((theta / (90.0 * deg)).powi(3) * 0.6).min(0.6);
+                let sky = [l * (0.45 + white), l * (0.7 + white * 0.5), l * 1.0];
+                let n = fbm(seed, dx * 3.0 + 20.0, dy * 3.0 + 20.0);
+                let cover = ((n - 0.52) / 0.08).clamp(0.0, 1.0);
+                if cover > 0.0 {
+                    let shade = 0.6 + 2.4 * fbm(seed ^ 0xC10D, dx * 8.0, dy * 8.0);
+                    let cl = 1.6 * shade * (1.0 + 3.0 * (-gamma / (15.0 * deg)).exp());
+                    [
+                        sky[0] * (1.0 - cover) + cl * cover,
+                        sky[1] * (1.0 - cover) + cl * cover,
+                        sky[2] * (1.0 - cover) + cl * 1.05 * cover,
+                    ]
+                } else {
+                    sky
+                }
+            };
+            img.set_pixel(x, y, [rgb[0] as f32, rgb[1] as f32, rgb[2] as f32]);
+        }
+    }
+    img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crf_inverse_undoes_forward() {
+        let c = Crf {
+            gamma: 2.2,
+            shoulder: 0.8,
+        };
+        for x in [0.0, 1e-4, 0.01, 0.3, 0.99, 1.0] {
+            assert!((c.inverse(c.forward(x)) - x).abs() < 1e-12 * (1.0 + x));
+        }
+        assert!((c.forward(1.0) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn absurd_options_are_errors() {
+        let o = SynthOptions {
+            width: 0,
+            ..Default::default()
+        };
+        assert!(generate(&o).is_err());
+        let o = SynthOptions {
+            evs: vec![0.0, 0.0],
+            ..Default::default()
+        };
+        assert!(generate(&o).is_err());
+    }
+}

@@ -1,0 +1,209 @@
+//! Our `.hdr` and `.exr` files, read back by two independent implementations (OpenCV and
+//! OpenImageIO) through `scripts/independent_readers.py`.
+//!
+//! Skipped when `python3 -c "import cv2, OpenImageIO"` fails, unless
+//! `SKYDOME_REQUIRE_INDEPENDENT_READERS=1` (CI), in which case that is a failure. The Python
+//! interpreter is `$SKYDOME_PYTHON` (default `python3`).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use skydome::formats::exr::{encode_exr, read_exr, ExrPixelType, Limits as ExrLimits};
+use skydome::formats::rgbe::{decode_rgbe, encode_rgbe, Limits};
+use skydome::formats::{HdrMeta, PixelPoint, SunMark};
+use skydome::HdrImage;
+
+fn python() -> String {
+    std::env::var("SKYDOME_PYTHON").unwrap_or_else(|_| "python3".to_owned())
+}
+
+fn readers_available(py: &str) -> bool {
+    Command::new(py)
+        .args(["-c", "import cv2, OpenImageIO"])
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+/// A sky-like image spanning `stops` stops: a dim-to-bright gradient, a sun disc, noise.
+fn sky(width: usize, height: usize, stops: f64, seed: u64) -> HdrImage {
+    let mut img = HdrImage::new(width, height);
+    let mut s = seed | 1;
+    for y in 0..height {
+        for x in 0..width {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let u = (s >> 40) as f64 / (1u64 << 24) as f64;
+            let t = (x + y * width) as f64 / (width * height) as f64;
+            let mut v = 2f64.powf(t * (stops - 4.0) - (stops - 4.0) / 2.0);
+            let (dx, dy) = (
+                x as f64 - width as f64 * 0.7,
+                y as f64 - height as f64 * 0.3,
+            );
+            if dx * dx + dy * dy < 4.0 {
+                v = 2f64.powf(stops / 2.0);
+            }
+            let row_kind = y % 7;
+            let px = match row_kind {
+                0 => [0.0; 3],
+                1 => [0.25, 0.5, 1.0],
+                _ => [v * (0.8 + 0.2 * u), v, v * (1.2 - 0.2 * u)],
+            };
+            img.set_pixel(x, y, px.map(|c| c as f32));
+        }
+    }
+    img
+}
+
+fn meta(width: usize, height: usize) -> HdrMeta {
+    HdrMeta {
+        exposure: Some(0.5),
+        capdate: Some("2024:06:21 14:03:59".into()),
+        gmt: Some("2024:06:21 12:03:59".into()),
+        view: Some("-vta -vh 180 -vv 180".into()),
+        sun: Some(SunMark {
+            pixel: PixelPoint {
+                x: width as f64 * 0.7 + 0.5,
+                y: height as f64 * 0.3 + 0.5,
+            },
+            azimuth_deg: Some(135.25),
+            elevation_deg: Some(40.5),
+        }),
+        north: Some(PixelPoint {
+            x: width as f64 / 2.0,
+            y: 0.5,
+        }),
+        software: None,
+        other: vec!["# written by skydome's independent_readers test".into()],
+    }
+}
+
+fn dump(path: &Path, data: &[f32]) {
+    let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn opencv_and_openimageio_read_our_hdr_and_exr_files() {
+    let py = python();
+    let required = std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").is_ok_and(|v| v == "1");
+    if !readers_available(&py) {
+        assert!(
+            !required,
+            "SKYDOME_REQUIRE_INDEPENDENT_READERS=1 but `{py} -c \"import cv2, OpenImageIO\"` fails; pip install numpy \"opencv-python-headless<5\" OpenImageIO"
+        );
+        eprintln!("skipping: `{py}` cannot import cv2 and OpenImageIO (set SKYDOME_PYTHON)");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        // ≥ 16 stops (20 here) with a sun disc 2^10 above the mid level.
+        ("wide_range_20_stops", sky(640, 48, 20.0, 7)),
+        // Narrower than 8: flat scanlines.
+        ("narrow_flat_scanlines", sky(5, 9, 16.0, 11)),
+        ("runs_and_noise", sky(300, 40, 8.0, 13)),
+    ];
+    let mut manifest = Vec::new();
+    for (name, img) in &cases {
+        let m = meta(img.width, img.height);
+        let hdr = encode_rgbe(img, &m).unwrap();
+        std::fs::write(dir.path().join(format!("{name}.hdr")), &hdr).unwrap();
+        // What the .hdr holds is the RGBE-quantised image: our own decode of our own output.
+        let decoded = decode_rgbe(&hdr, &Limits::default()).unwrap();
+        dump(
+            &dir.path().join(format!("{name}.hdr.f32")),
+            &decoded.image.data,
+        );
+        let mut files = vec![serde_json::json!({
+            "file": format!("{name}.hdr"), "expect": format!("{name}.hdr.f32"), "kind": "hdr"
+        })];
+        for (t, kind) in [(ExrPixelType::Half, "half"), (ExrPixelType::Float, "float")] {
+            let exr = encode_exr(img, &m, t).unwrap();
+            let file = format!("{name}.{kind}.exr");
+            std::fs::write(dir.path().join(&file), &exr).unwrap();
+            let stored = read_exr(&exr, &ExrLimits::default()).unwrap().image.data;
+            if t == ExrPixelType::Float {
+                assert_eq!(stored, img.data);
+            }
+            dump(&dir.path().join(format!("{file}.f32")), &stored);
+            files.push(serde_json::json!({
+                "file": file, "expect": format!("{file}.f32"), "kind": kind
+            }));
+        }
+        let sun = m.sun.unwrap().pixel;
+        let north = m.north.unwrap();
+        manifest.push(serde_json::json!({
+            "name": name,
+            "width": img.width,
+            "height": img.height,
+            "files": files,
+            "attrs": {
+                "sun": format!("-Y {} +X {}", sun.y, sun.x),
+                "north": format!("-Y {} +X {}", north.y, north.x),
+                "capdate": m.capdate,
+                "software": format!("skydome {}", skydome::VERSION),
+                "comments": m.other.join("\n"),
+                "exposure": m.exposure,
+            }
+        }));
+    }
+    std::fs::write(
+        dir.path().join("manifest.json"),
+        serde_json::to_vec_pretty(&serde_json::json!({ "cases": manifest })).unwrap(),
+    )
+    .unwrap();
+
+    let script: PathBuf =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/independent_readers.py");
+    let out = Command::new(&py)
+        .arg(&script)
+        .arg(dir.path())
+        .output()
+        .expect("running the independent readers script");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    eprintln!("{stdout}{stderr}");
+    assert!(
+        out.status.success(),
+        "independent readers disagree with our files:\n{stdout}{stderr}"
+    );
+    // The script must be able to fail: one sample off by 1% in an expectation is a mismatch.
+    let (name, img) = &cases[1];
+    let mut wrong = img.data.clone();
+    wrong[46] = wrong[46] * 1.01 + 0.01;
+    let expect = dir.path().join(format!("{name}.float.exr.f32"));
+    let original = std::fs::read(&expect).unwrap();
+    dump(&expect, &wrong);
+    let out = Command::new(&py)
+        .arg(&script)
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "a wrong expectation must fail the script"
+    );
+    std::fs::write(&expect, original).unwrap();
+
+    // The --check mode (for CLI outputs) must accept our .exr against its sibling .hdr.
+    let (name, _) = &cases[0];
+    let hdr = dir.path().join(format!("{name}.hdr"));
+    let exr = dir.path().join(format!("{name}.exr"));
+    std::fs::copy(dir.path().join(format!("{name}.half.exr")), &exr).unwrap();
+    let out = Command::new(&py)
+        .arg(&script)
+        .arg("--check")
+        .arg(&hdr)
+        .arg(&exr)
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprintln!("{text}");
+    assert!(out.status.success(), "--check failed:\n{text}");
+    assert!(text.contains("agree within RGBE precision"), "{text}");
+}
