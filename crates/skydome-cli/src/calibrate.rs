@@ -157,8 +157,8 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     let mut profile = if a.linear {
         CameraProfile::linear()
     } else {
-        calibration = response::calibrate(&br.frames, a.calib.circle, &opts)
-            .context("calibration failed")?;
+        calibration =
+            response::calibrate(&br.frames, a.calib.circle, &opts).context("calibration failed")?;
         report.sampling = Some(calibration.report());
         report.monotonic_fixes = Some(calibration.monotonic_fixes);
         if let Some(k) = a.repeat {
@@ -196,10 +196,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
 fn print_report(r: &Report) {
     if let Some(s) = r.sampling {
         let raised = if s.target > s.requested {
-            format!(
-                " (raised from {} so that N·(frames−1) ≥ 255)",
-                s.requested
-            )
+            format!(" (raised from {} so that N·(frames−1) ≥ 255)", s.requested)
         } else {
             String::new()
         };

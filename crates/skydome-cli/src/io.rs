@@ -92,11 +92,19 @@ fn times_from_list(list: &Path, files: &[PathBuf]) -> Result<Vec<f64>> {
                 .iter()
                 .find(|(n, _)| {
                     Path::new(n) == f.as_path()
-                        || Path::new(n).file_name().map(|s| s.to_string_lossy().to_string())
+                        || Path::new(n)
+                            .file_name()
+                            .map(|s| s.to_string_lossy().to_string())
                             == fname
                 })
                 .map(|(_, t)| *t)
-                .ok_or_else(|| anyhow!("{}: not listed in {name}; add a line '{} TIME'", f.display(), fname.unwrap_or_default()))
+                .ok_or_else(|| {
+                    anyhow!(
+                        "{}: not listed in {name}; add a line '{} TIME'",
+                        f.display(),
+                        fname.unwrap_or_default()
+                    )
+                })
         })
         .collect()
 }

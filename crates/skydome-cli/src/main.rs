@@ -8,10 +8,11 @@
 
 mod calibrate;
 mod compare;
-mod demo;
+
 mod info;
 mod io;
 mod merge;
+mod pictures;
 mod radiance;
 mod tonemap;
 
@@ -42,8 +43,6 @@ enum Command {
     Info(info::Args),
     /// Compare two radiance maps after fitting one global scale.
     Compare(compare::Args),
-    /// Run the whole pipeline on the bracket bundled with skydome.
-    Demo(demo::Args),
 }
 
 fn main() -> ExitCode {
@@ -55,7 +54,6 @@ fn main() -> ExitCode {
         Command::Tonemap(a) => tonemap::run(a, quiet),
         Command::Info(a) => info::run(a),
         Command::Compare(a) => compare::run(a),
-        Command::Demo(a) => demo::run(a, quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

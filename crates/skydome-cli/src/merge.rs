@@ -83,16 +83,22 @@ struct FrameSummary {
 
 /// The top-level entry point for `skydome merge`.
 pub fn run(a: Args, quiet: bool) -> Result<()> {
-    let outs: Vec<&PathBuf> = [Some(&a.output), a.exr.as_ref(), a.preview.as_ref(), a.confidence.as_ref()]
-        .into_iter()
-        .flatten()
-        .collect();
+    let outs: Vec<&PathBuf> = [
+        Some(&a.output),
+        a.exr.as_ref(),
+        a.preview.as_ref(),
+        a.confidence.as_ref(),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
     for o in &outs {
         io::check_destination(o, &a.images, a.force)?;
     }
     let profile = match &a.profile {
         Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("{}: cannot read", p.display()))?;
             Some(CameraProfile::from_json(&text).with_context(|| p.display().to_string())?)
         }
         None => None,
@@ -102,8 +108,20 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     let mut sampling = None;
     let (resp, response_from) = match &profile {
         Some(p) => (
-            p.response().with_context(|| format!("{}", a.profile.as_ref().map_or(String::new(), |p| p.display().to_string())))?,
-            format!("profile {}", a.profile.as_ref().map_or(String::new(), |p| p.display().to_string())),
+            p.response().with_context(|| {
+                format!(
+                    "{}",
+                    a.profile
+                        .as_ref()
+                        .map_or(String::new(), |p| p.display().to_string())
+                )
+            })?,
+            format!(
+                "profile {}",
+                a.profile
+                    .as_ref()
+                    .map_or(String::new(), |p| p.display().to_string())
+            ),
         ),
         None => {
             let spin = io::spinner(quiet, "calibrating");
@@ -150,15 +168,24 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
 
     let spin = io::spinner(quiet, "encoding");
     let mut outputs = Outputs::default();
-    outputs.add(&a.output, crate::radiance::encode(&a.output, &image, &meta, a.exr_float)?);
+    outputs.add(
+        &a.output,
+        crate::radiance::encode(&a.output, &image, &meta, a.exr_float)?,
+    );
     if let Some(p) = &a.exr {
         outputs.add(p, crate::radiance::encode(p, &image, &meta, a.exr_float)?);
     }
     if let Some(p) = &a.preview {
-        outputs.add(p, crate::pictures::preview(p, &image, &crate::pictures::default_tonemap(None), false)?);
+        outputs.add(
+            p,
+            crate::pictures::preview(p, &image, &crate::pictures::default_tonemap(None), false)?,
+        );
     }
     if let (Some(p), Some(c)) = (&a.confidence, &merged.confidence) {
-        outputs.add(p, crate::pictures::grey_png(p, image.width, image.height, c)?);
+        outputs.add(
+            p,
+            crate::pictures::grey_png(p, image.width, image.height, c)?,
+        );
     }
     spin.finish_and_clear();
     let written = outputs.commit(&a.images, a.force)?;
@@ -187,7 +214,11 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     if a.json {
         crate::out(&serde_json::to_string_pretty(&summary)?);
     } else if !quiet {
-        let times: Vec<String> = summary.frames.iter().map(|f| format_time(f.time_s)).collect();
+        let times: Vec<String> = summary
+            .frames
+            .iter()
+            .map(|f| format_time(f.time_s))
+            .collect();
         crate::out(&format!(
             "merged {} frames ({}) {}x{}, response {}",
             summary.frames.len(),

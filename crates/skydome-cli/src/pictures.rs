@@ -21,7 +21,8 @@ pub fn curve_plot(path: &Path, cal: &Calibration) -> Result<Vec<u8>> {
     let curves = cal.response.curves();
     let name = path.display();
     match crate::io::extension(path).as_str() {
-        "png" => plot::response_curves_png(curves, samples, (1000, 750)).with_context(|| name.to_string()),
+        "png" => plot::response_curves_png(curves, samples, (1000, 750))
+            .with_context(|| name.to_string()),
         "svg" => Ok(plot::response_curves_svg(curves, samples, (800, 600))
             .with_context(|| name.to_string())?
             .into_bytes()),

@@ -42,7 +42,12 @@ fn merge_set(dir: &Path, files: &[&str], extra: &[&str], out: &Path) -> serde_js
     let o = Command::new(BIN)
         .arg("merge")
         .args(files.iter().map(|f| dir.join(f)))
-        .args(["-o".as_ref(), hdr.as_os_str(), "--exr".as_ref(), exr.as_os_str()])
+        .args([
+            "-o".as_ref(),
+            hdr.as_os_str(),
+            "--exr".as_ref(),
+            exr.as_os_str(),
+        ])
         .args(extra)
         .args(["--json", "--quiet"])
         .output()
@@ -54,7 +59,8 @@ fn merge_set(dir: &Path, files: &[&str], extra: &[&str], out: &Path) -> serde_js
     );
     assert!(hdr.is_file() && exr.is_file());
     if let Some(py) = python() {
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/independent_readers.py");
+        let script =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/independent_readers.py");
         let c = Command::new(py)
             .arg(script)
             .arg("--check")
@@ -82,7 +88,12 @@ fn frobisher_merges_from_exif_alone() {
         &[],
         &tmp.path().join("frobisher"),
     );
-    let times: Vec<f64> = s["frames"].as_array().unwrap().iter().map(|f| f["time_s"].as_f64().unwrap()).collect();
+    let times: Vec<f64> = s["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["time_s"].as_f64().unwrap())
+        .collect();
     assert_eq!(times, [0.125, 1.0, 8.0]);
     let hdr = std::fs::read(tmp.path().join("frobisher.hdr")).unwrap();
     let head = String::from_utf8_lossy(&hdr[..200]);
@@ -95,7 +106,12 @@ fn banterle_room_merges_seven_frames() {
     let tmp = tempfile::tempdir().unwrap();
     let names: Vec<String> = (0..7).map(|i| format!("stack_room_exp_{i}.jpg")).collect();
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
-    let s = merge_set(&d.join("banterle_room"), &refs, &[], &tmp.path().join("room"));
+    let s = merge_set(
+        &d.join("banterle_room"),
+        &refs,
+        &[],
+        &tmp.path().join("room"),
+    );
     assert_eq!(s["frames"].as_array().unwrap().len(), 7);
 }
 
@@ -109,6 +125,14 @@ fn banterle_alignment_files_out_of_order_merge() {
         &[],
         &tmp.path().join("align"),
     );
-    let files: Vec<&str> = s["frames"].as_array().unwrap().iter().map(|f| f["file"].as_str().unwrap()).collect();
-    assert!(files[0].ends_with("IMG_4210.jpg") && files[2].ends_with("IMG_4211.jpg"), "{files:?}");
+    let files: Vec<&str> = s["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["file"].as_str().unwrap())
+        .collect();
+    assert!(
+        files[0].ends_with("IMG_4210.jpg") && files[2].ends_with("IMG_4211.jpg"),
+        "{files:?}"
+    );
 }

@@ -476,10 +476,18 @@ impl SphereScene {
             return bad("height", self.height as f64, "use 16..=8192 px");
         }
         if !(self.fov_deg >= 1.0 && self.fov_deg <= 150.0) {
-            return bad("fov", self.fov_deg, "use a horizontal field of view of 1..=150°");
+            return bad(
+                "fov",
+                self.fov_deg,
+                "use a horizontal field of view of 1..=150°",
+            );
         }
         if !self.view_azimuth_deg.is_finite() {
-            return bad("view azimuth", self.view_azimuth_deg, "use a finite azimuth in degrees");
+            return bad(
+                "view azimuth",
+                self.view_azimuth_deg,
+                "use a finite azimuth in degrees",
+            );
         }
         for (name, v) in [
             ("sphere albedo", self.sphere_albedo),
@@ -491,7 +499,11 @@ impl SphereScene {
             }
         }
         if !(1..=8).contains(&self.samples_per_axis) {
-            return bad("samples", self.samples_per_axis as f64, "use 1..=8 rays per axis");
+            return bad(
+                "samples",
+                self.samples_per_axis as f64,
+                "use 1..=8 rays per axis",
+            );
         }
         Ok(())
     }
@@ -644,7 +656,11 @@ impl Shader<'_> {
                 }
             }
         }
-        let t_ground = if d[2] < 0.0 { -o[2] / d[2] } else { f64::INFINITY };
+        let t_ground = if d[2] < 0.0 {
+            -o[2] / d[2]
+        } else {
+            f64::INFINITY
+        };
         match best {
             Some((t, i)) if t < t_ground => {
                 let p = add(o, scale(d, t));

@@ -94,7 +94,9 @@ pub enum TonemapError {
         hint: &'static str,
     },
     /// An operator name that is not one of [`Operator::NAMES`].
-    #[error("unknown tone-mapping operator '{0}'; use one of: minmax, linear, reinhard, drago, aces")]
+    #[error(
+        "unknown tone-mapping operator '{0}'; use one of: minmax, linear, reinhard, drago, aces"
+    )]
     UnknownOperator(String),
     /// No unmasked pixel has positive, finite luminance, so automatic exposure has nothing to use.
     #[error("no pixel inside the mask has positive luminance; check the mask or give a fixed exposure (EV)")]
@@ -256,7 +258,11 @@ impl ToneMap {
         }
         if let Some(c) = self.mask {
             if !(c.r > 0.0 && c.r.is_finite() && c.cx.is_finite() && c.cy.is_finite()) {
-                return bad("mask radius", c.r, "use a circle with a positive, finite radius");
+                return bad(
+                    "mask radius",
+                    c.r,
+                    "use a circle with a positive, finite radius",
+                );
             }
         }
         Ok(())
@@ -295,7 +301,11 @@ impl LuminanceStats {
         if self.count == 0 {
             return 0.0;
         }
-        let p = if p.is_nan() { 50.0 } else { p.clamp(0.0, 100.0) };
+        let p = if p.is_nan() {
+            50.0
+        } else {
+            p.clamp(0.0, 100.0)
+        };
         let target = ((p / 100.0) * self.count as f64).ceil().max(1.0) as u64;
         let mut acc = 0u64;
         for (i, &n) in self.hist.iter().enumerate() {

@@ -91,7 +91,10 @@ fn minmax_darkens_the_sky_when_the_sun_sets_the_maximum() {
         .filter(|i| sky[*i])
         .map(|i| out.data[3 * i + 1] as f32)
         .collect();
-    assert!(median(vals) < 2.0, "the seed's fault is documented, so prove it");
+    assert!(
+        median(vals) < 2.0,
+        "the seed's fault is documented, so prove it"
+    );
 }
 
 #[test]
@@ -175,7 +178,10 @@ fn joint_scaling_keeps_channel_ratios_below_white() {
             for k in 1..3 {
                 let want = c[k] / c[0];
                 let got = p[k] / p[0];
-                assert!((got / want - 1.0).abs() < 1e-4, "{op} hue shift {c:?} → {p:?}");
+                assert!(
+                    (got / want - 1.0).abs() < 1e-4,
+                    "{op} hue shift {c:?} → {p:?}"
+                );
             }
         }
     }
@@ -193,7 +199,11 @@ fn highlights_desaturate_towards_white_without_changing_display_luminance() {
     let x = l_in;
     let want = x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14);
     assert!(d[0] <= 1.0 && d[0] > d[1] && d[1] > d[2], "{d:?}");
-    assert!((luminance(d) - want).abs() < 1e-5, "{} vs {want}", luminance(d));
+    assert!(
+        (luminance(d) - want).abs() < 1e-5,
+        "{} vs {want}",
+        luminance(d)
+    );
 }
 
 #[test]
@@ -461,7 +471,9 @@ fn shared_data() -> Option<PathBuf> {
 fn read_hdr(path: &Path) -> HdrImage {
     let f = std::io::BufReader::new(std::fs::File::open(path).unwrap());
     let dec = image::codecs::hdr::HdrDecoder::new(f).unwrap();
-    let img = image::DynamicImage::from_decoder(dec).unwrap().into_rgb32f();
+    let img = image::DynamicImage::from_decoder(dec)
+        .unwrap()
+        .into_rgb32f();
     let (w, h) = img.dimensions();
     HdrImage::from_vec(w as usize, h as usize, img.into_raw()).unwrap()
 }
