@@ -9,11 +9,13 @@
 mod calibrate;
 mod compare;
 
+mod geometry;
 mod info;
 mod io;
 mod merge;
 mod pictures;
 mod radiance;
+mod synth;
 mod tonemap;
 
 use std::process::ExitCode;
@@ -43,6 +45,8 @@ enum Command {
     Info(info::Args),
     /// Compare two radiance maps after fitting one global scale.
     Compare(compare::Args),
+    /// Write a synthetic fish-eye bracket with known radiance and response (ground truth).
+    Synth(synth::Args),
 }
 
 fn main() -> ExitCode {
@@ -54,6 +58,7 @@ fn main() -> ExitCode {
         Command::Tonemap(a) => tonemap::run(a, quiet),
         Command::Info(a) => info::run(a),
         Command::Compare(a) => compare::run(a),
+        Command::Synth(a) => synth::run(a, quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -9,6 +9,7 @@ use skydome::merge::{self, MergeOptions};
 use skydome::response::{self, CameraProfile, Weighting};
 
 use crate::calibrate::CalibArgs;
+use crate::geometry::{self, GeometryArgs};
 use crate::io::{self, BracketArgs, Outputs};
 
 /// Arguments of `skydome merge`.
@@ -42,6 +43,8 @@ pub struct Args {
     pub bracket: BracketArgs,
     #[command(flatten)]
     pub calib: CalibArgs,
+    #[command(flatten)]
+    pub geometry: GeometryArgs,
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
@@ -69,6 +72,7 @@ struct Summary {
     clipped_high_pixels: usize,
     clipped_low_pixels: usize,
     meta: HdrMeta,
+    geometry: Option<geometry::GeometryReport>,
     written: Vec<String>,
 }
 
@@ -91,7 +95,9 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     ]
     .into_iter()
     .flatten()
+    .chain(a.geometry.outputs())
     .collect();
+    a.geometry.check()?;
     for o in &outs {
         io::check_destination(o, &a.images, a.force)?;
     }
@@ -105,6 +111,12 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     };
     let br = io::load_bracket(&a.images, &a.bracket, quiet)?;
 
+    let lens = match a.geometry.enabled() {
+        true => Some(geometry::lens_profile(&a.geometry, &br, a.calib.circle)?),
+        false => None,
+    };
+    // Calibration samples come from inside the lens circle when there is one.
+    let circle = a.calib.circle.or(lens.as_ref().map(|l| l.0.circle));
     let mut sampling = None;
     let (resp, response_from) = match &profile {
         Some(p) => (
@@ -125,7 +137,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         ),
         None => {
             let spin = io::spinner(quiet, "calibrating");
-            let cal = response::calibrate(&br.frames, a.calib.circle, &a.calib.options())
+            let cal = response::calibrate(&br.frames, circle, &a.calib.options())
                 .context("calibration failed")?;
             spin.finish_and_clear();
             sampling = Some(cal.report().clone());
@@ -159,12 +171,38 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     }
 
     let (capdate, gmt) = br.info.header_times();
-    let meta = HdrMeta {
+    let mut meta = HdrMeta {
         capdate,
         gmt,
         ..HdrMeta::default()
     };
-    let image = merged.radiance;
+    let mut image = merged.radiance;
+    let mut geo_report = None;
+    let mut equirect = None;
+    let mut marks = None;
+    if let Some(lens) = lens {
+        let orientation = match a.bracket.orientation {
+            io::Orientation::Apply => 1,
+            io::Orientation::Ignore => br.info.orientation,
+        };
+        let g = geometry::apply(&a.geometry, &br, lens, image, orientation)?;
+        image = g.image;
+        meta.sun = g.meta.sun;
+        meta.north = g.meta.north;
+        meta.view = g.meta.view;
+        equirect = g.equirect;
+        marks = Some(g.marks);
+        if let Some(c) = &g.report.sun_cross_check {
+            io::warn(
+                quiet || c.angle_deg < 2.0,
+                &format!(
+                    "detected sun is {:.1}° from the computed one; a compass error of {:+.1}° would explain the azimuth",
+                    c.angle_deg, c.compass_error_deg
+                ),
+            );
+        }
+        geo_report = Some(g.report);
+    }
 
     let spin = io::spinner(quiet, "encoding");
     let mut outputs = Outputs::default();
@@ -184,8 +222,19 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     if let (Some(p), Some(c)) = (&a.confidence, &merged.confidence) {
         outputs.add(
             p,
-            crate::pictures::grey_png(p, image.width, image.height, c)?,
+            crate::pictures::grey_png(p, br.width(), br.height(), c)?,
         );
+    }
+    if let (Some(p), Some(e)) = (&a.geometry.equirect, &equirect) {
+        let m = HdrMeta {
+            capdate: meta.capdate.clone(),
+            gmt: meta.gmt.clone(),
+            ..HdrMeta::default()
+        };
+        outputs.add(p, crate::radiance::encode(p, e, &m, a.exr_float)?);
+    }
+    if let (Some(p), Some(m)) = (&a.geometry.overlay, &marks) {
+        outputs.add(p, geometry::overlay_picture(p, &image, m)?);
     }
     spin.finish_and_clear();
     let written = outputs.commit(&a.images, a.force)?;
@@ -209,6 +258,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         clipped_high_pixels: merged.clipped_high,
         clipped_low_pixels: merged.clipped_low,
         meta,
+        geometry: geo_report,
         written: written.iter().map(|p| p.display().to_string()).collect(),
     };
     if a.json {
@@ -227,6 +277,33 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
             summary.height,
             summary.response
         ));
+        if let Some(g) = &summary.geometry {
+            crate::out(&format!(
+                "lens {} {:.0}°, circle ({:.1}, {:.1}) r {:.1} px; horizon r {:.1} px in the output",
+                g.lens.projection.kind(),
+                g.lens.fov_deg,
+                g.lens.circle.cx,
+                g.lens.circle.cy,
+                g.lens.circle.r,
+                g.horizon.r
+            ));
+            match (&g.sun, g.sun_source) {
+                (Some(s), Some(src)) => crate::out(&format!(
+                    "sun ({src}) at ({:.1}, {:.1}){}",
+                    s.pixel.x,
+                    s.pixel.y,
+                    match (s.azimuth_deg, s.elevation_deg) {
+                        (Some(az), Some(el)) => format!(", azimuth {az:.2}°, elevation {el:.2}°"),
+                        (None, Some(el)) => format!(", elevation {el:.2}° (give --north for its azimuth)"),
+                        _ => String::new(),
+                    }
+                )),
+                _ => crate::out("sun: none"),
+            }
+            if let Some(n) = g.north {
+                crate::out(&format!("north point at ({:.1}, {:.1})", n.x, n.y));
+            }
+        }
         for w in &summary.written {
             crate::out(&format!("wrote {w}"));
         }

@@ -6,8 +6,11 @@
 //! The environment is an equirectangular [`HdrImage`], normally 2:1 (any size is accepted; the
 //! mapping uses normalised coordinates):
 //! - column coordinate `u ∈ [0, 1)` (pixel `x` has centre `u = (x + 0.5) / width`) is azimuth
-//!   `φ = 2π·u`, measured **from true north towards east**: `u = 0` north, `u = 0.25` east,
-//!   `u = 0.5` south, `u = 0.75` west;
+//!   `φ = 2π·(u − ¼)`, measured **from true north towards east**: `u = 0` west, `u = 0.25`
+//!   north, `u = 0.5` east (the image centre), `u = 0.75` south. This is the map
+//!   [`crate::reproject`] writes with its default centre azimuth of 90° (Blender's world `+X` =
+//!   east at the centre, `+Y` = north), so a map from `skydome merge --equirect` lights the
+//!   spheres with the sun where the dome has it;
 //! - row coordinate `v ∈ [0, 1]` (pixel `y` has centre `v = (y + 0.5) / height`) is elevation
 //!   `e = π/2 − π·v`: the top row is the zenith (+90°), the middle the horizon, the bottom the
 //!   nadir (−90°).
@@ -95,15 +98,15 @@ pub fn direction_from_azimuth_elevation(az_deg: f64, el_deg: f64) -> [f64; 3] {
 }
 
 /// Lat-long coordinates `(u, v)` of a direction (east, north, up; need not be unit length):
-/// `u = φ / 2π ∈ [0, 1)` with azimuth φ from north towards east, `v = 0.5 − e/π ∈ [0, 1]`.
-/// The zero vector maps to the zenith `(0, 0)`.
+/// `u = φ / 2π + ¼` wrapped to `[0, 1)` with azimuth φ from north towards east (east at the
+/// centre `u = ½`), `v = 0.5 − e/π ∈ [0, 1]`. The zero vector maps to the zenith `(¼, 0)`.
 pub fn direction_to_equirect_uv(d: [f64; 3]) -> (f64, f64) {
     let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     if !(n > 0.0) {
-        return (0.0, 0.0);
+        return (0.25, 0.0);
     }
     let el = (d[2] / n).clamp(-1.0, 1.0).asin();
-    let mut u = d[0].atan2(d[1]) / (2.0 * PI);
+    let mut u = d[0].atan2(d[1]) / (2.0 * PI) + 0.25;
     if u < 0.0 {
         u += 1.0;
     }
@@ -116,7 +119,7 @@ pub fn direction_to_equirect_uv(d: [f64; 3]) -> (f64, f64) {
 /// The inverse of [`direction_to_equirect_uv`]: unit direction (east, north, up) at lat-long
 /// coordinates `(u, v)`.
 pub fn equirect_uv_to_direction(u: f64, v: f64) -> [f64; 3] {
-    let phi = 2.0 * PI * u;
+    let phi = 2.0 * PI * (u - 0.25);
     let el = PI * (0.5 - v);
     [el.cos() * phi.sin(), el.cos() * phi.cos(), el.sin()]
 }

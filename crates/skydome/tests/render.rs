@@ -45,14 +45,29 @@ fn sky_with_sun(w: usize, az: f64, el: f64, radius_deg: f64, sun_l: f32) -> HdrI
 }
 
 #[test]
-fn equirect_convention_north_at_u0_east_at_quarter_south_at_half_zenith_on_top() {
+fn render_reads_the_equirect_map_reproject_writes() {
+    use skydome::reproject::MapProjection;
+    let map = MapProjection::Equirect {
+        width: 360,
+        centre_azimuth_deg: 90.0,
+    };
+    for (x, y) in [(10.5, 30.5), (90.5, 90.0), (200.25, 10.75), (300.0, 170.0)] {
+        let v = map.pixel_to_vector(x, y).unwrap().unwrap();
+        let d = equirect_uv_to_direction(x / 360.0, y / 180.0);
+        let dist = ((v[0] - d[0]).powi(2) + (v[1] - d[1]).powi(2) + (v[2] - d[2]).powi(2)).sqrt();
+        assert!(dist < 1e-9, "({x}, {y}): reproject {v:?} vs render {d:?}");
+    }
+}
+
+#[test]
+fn equirect_convention_north_at_quarter_east_at_centre_south_at_three_quarters_zenith_on_top() {
     let cases = [
-        ([0.0, 1.0, 0.0], (0.0, 0.5)),
-        ([1.0, 0.0, 0.0], (0.25, 0.5)),
-        ([0.0, -1.0, 0.0], (0.5, 0.5)),
-        ([-1.0, 0.0, 0.0], (0.75, 0.5)),
-        ([0.0, 0.0, 1.0], (0.0, 0.0)),
-        ([0.0, 0.0, -1.0], (0.0, 1.0)),
+        ([0.0, 1.0, 0.0], (0.25, 0.5)),
+        ([1.0, 0.0, 0.0], (0.5, 0.5)),
+        ([0.0, -1.0, 0.0], (0.75, 0.5)),
+        ([-1.0, 0.0, 0.0], (0.0, 0.5)),
+        ([0.0, 0.0, 1.0], (0.25, 0.0)),
+        ([0.0, 0.0, -1.0], (0.25, 1.0)),
     ];
     for (d, (u, v)) in cases {
         let (gu, gv) = direction_to_equirect_uv(d);
