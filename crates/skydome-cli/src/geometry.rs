@@ -100,14 +100,21 @@ fn parse_sun(s: &str) -> Result<SunArg, String> {
         "auto" => Ok(SunArg::Auto),
         "none" => Ok(SunArg::None),
         "ephemeris" => Ok(SunArg::Ephemeris),
-        _ => match s.split_once(',').map(|(x, y)| (x.trim().parse(), y.trim().parse())) {
-            Some((Ok(x), Ok(y))) if f64::is_finite(x) && f64::is_finite(y) => Ok(SunArg::Pixel(x, y)),
-            _ => Err(format!("'{s}': expected auto, none, ephemeris or X,Y in pixels")),
+        _ => match s
+            .split_once(',')
+            .map(|(x, y)| (x.trim().parse(), y.trim().parse()))
+        {
+            Some((Ok(x), Ok(y))) if f64::is_finite(x) && f64::is_finite(y) => {
+                Ok(SunArg::Pixel(x, y))
+            }
+            _ => Err(format!(
+                "'{s}': expected auto, none, ephemeris or X,Y in pixels"
+            )),
         },
     }
 }
 
-fn parse_ground(s: &str) -> Result<Ground, String> {
+pub fn parse_ground(s: &str) -> Result<Ground, String> {
     match s {
         "black" => Ok(Ground::Black),
         "mirror" => Ok(Ground::MirrorSky),
@@ -121,7 +128,9 @@ fn parse_ground(s: &str) -> Result<Ground, String> {
                 [r, g, b] if v.iter().all(|x| x.is_finite() && *x >= 0.0) => {
                     Ok(Ground::Constant([r, g, b]))
                 }
-                _ => Err(format!("'{s}': expected black, mirror or three non-negative R,G,B values")),
+                _ => Err(format!(
+                    "'{s}': expected black, mirror or three non-negative R,G,B values"
+                )),
             }
         }
     }
@@ -136,7 +145,10 @@ impl GeometryArgs {
     /// Refuses fish-eye options given without a lens.
     pub fn check(&self) -> Result<()> {
         if !self.enabled()
-            && (self.crop || self.north.is_some() || self.equirect.is_some() || self.overlay.is_some())
+            && (self.crop
+                || self.north.is_some()
+                || self.equirect.is_some()
+                || self.overlay.is_some())
         {
             bail!("--crop, --north, --equirect and --overlay need --lens lens.json or --fisheye");
         }
@@ -145,7 +157,10 @@ impl GeometryArgs {
 
     /// Output paths this part writes.
     pub fn outputs(&self) -> Vec<&PathBuf> {
-        [self.equirect.as_ref(), self.overlay.as_ref()].into_iter().flatten().collect()
+        [self.equirect.as_ref(), self.overlay.as_ref()]
+            .into_iter()
+            .flatten()
+            .collect()
     }
 }
 
@@ -222,7 +237,8 @@ pub fn lens_profile(
     circle: Option<Circle>,
 ) -> Result<(LensProfile, Option<CircleFit>)> {
     if let Some(p) = &a.lens {
-        let text = std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
+        let text =
+            std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
         let lens = LensProfile::from_json(&text).with_context(|| p.display().to_string())?;
         return Ok((lens, None));
     }
@@ -251,7 +267,8 @@ pub fn apply(
         PoseArg::ScreenUp => DevicePose::ScreenUp,
     };
     let orient = ImageOrientation::from_exif(orientation).context("EXIF orientation")?;
-    let full_geom = SkyGeometry::new(&lens, a.north.unwrap_or(0.0), pose, orient).context("sky geometry")?;
+    let full_geom =
+        SkyGeometry::new(&lens, a.north.unwrap_or(0.0), pose, orient).context("sky geometry")?;
 
     // Sun position in input pixels, from a tap, before any crop.
     let tapped = match a.sun {
@@ -262,7 +279,12 @@ pub fn apply(
     let (image, geom, offset, crop_radius) = if a.crop {
         let c = fisheye::crop_dome(&radiance, &lens, a.fov_out).context("crop")?;
         let g = full_geom.with_centre(c.horizon.cx, c.horizon.cy);
-        (c.image, g, (c.offset_x as f64, c.offset_y as f64), Some(c.crop_radius_px))
+        (
+            c.image,
+            g,
+            (c.offset_x as f64, c.offset_y as f64),
+            Some(c.crop_radius_px),
+        )
     } else {
         (radiance, full_geom, (0.0, 0.0), None)
     };
@@ -275,10 +297,9 @@ pub fn apply(
 
     // The ephemeris sun, when time and place are known.
     let time = match &a.time {
-        Some(t) => Some(
-            skydome::bracket::parse_iso8601(t)
-                .with_context(|| format!("--time '{t}': expected ISO 8601 with offset, e.g. 2026-06-21T12:30:00+02:00"))?,
-        ),
+        Some(t) => Some(skydome::bracket::parse_iso8601(t).with_context(|| {
+            format!("--time '{t}': expected ISO 8601 with offset, e.g. 2026-06-21T12:30:00+02:00")
+        })?),
         None => br.info.capture_time(),
     };
     let lat = a.lat.or(br.info.gps_latitude_deg);
@@ -400,9 +421,14 @@ pub fn apply(
 }
 
 /// A tone-mapped preview of `image` with `marks` drawn on it, encoded for `path`.
-pub fn overlay_picture(path: &std::path::Path, image: &HdrImage, marks: &OverlayMarks) -> Result<Vec<u8>> {
+pub fn overlay_picture(
+    path: &std::path::Path,
+    image: &HdrImage,
+    marks: &OverlayMarks,
+) -> Result<Vec<u8>> {
     let tm = crate::pictures::default_tonemap(marks.visible);
-    let mut rgb = skydome::tonemap::tonemap_u8(image, &tm).with_context(|| path.display().to_string())?;
+    let mut rgb =
+        skydome::tonemap::tonemap_u8(image, &tm).with_context(|| path.display().to_string())?;
     overlay::draw_overlay(&mut rgb, marks);
     crate::pictures::encode_rgb8(path, &rgb)
 }

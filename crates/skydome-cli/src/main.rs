@@ -12,11 +12,14 @@ mod compare;
 mod geometry;
 mod info;
 mod io;
+mod lens;
 mod merge;
 mod pictures;
 mod radiance;
+mod reproject;
 mod synth;
 mod tonemap;
+mod views;
 
 use std::process::ExitCode;
 
@@ -45,6 +48,16 @@ enum Command {
     Info(info::Args),
     /// Compare two radiance maps after fitting one global scale.
     Compare(compare::Args),
+    /// Find the fish-eye image circle, fit the lens projection, write lens profiles.
+    Lens(lens::Args),
+    /// Reproject a fish-eye dome to an equirectangular, angular, mirror-ball or fish-eye map.
+    Reproject(reproject::Args),
+    /// A false-colour luminance map with a logarithmic colour bar (PNG).
+    Falsecolor(views::FalsecolorArgs),
+    /// A histogram of log2 luminance with the dynamic range in stops (PNG).
+    Histogram(views::HistogramArgs),
+    /// A diffuse and a mirror sphere lit by an equirectangular dome (PNG/JPEG).
+    Render(views::RenderArgs),
     /// Write a synthetic fish-eye bracket with known radiance and response (ground truth).
     Synth(synth::Args),
 }
@@ -59,6 +72,11 @@ fn main() -> ExitCode {
         Command::Info(a) => info::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Synth(a) => synth::run(a, quiet),
+        Command::Lens(a) => lens::run(a, quiet),
+        Command::Reproject(a) => reproject::run(a, quiet),
+        Command::Falsecolor(a) => views::falsecolor(a, quiet),
+        Command::Histogram(a) => views::histogram(a, quiet),
+        Command::Render(a) => views::render(a, quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

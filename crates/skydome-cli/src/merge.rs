@@ -220,10 +220,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         );
     }
     if let (Some(p), Some(c)) = (&a.confidence, &merged.confidence) {
-        outputs.add(
-            p,
-            crate::pictures::grey_png(p, br.width(), br.height(), c)?,
-        );
+        outputs.add(p, crate::pictures::grey_png(p, br.width(), br.height(), c)?);
     }
     if let (Some(p), Some(e)) = (&a.geometry.equirect, &equirect) {
         let m = HdrMeta {
@@ -294,7 +291,8 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
                     s.pixel.y,
                     match (s.azimuth_deg, s.elevation_deg) {
                         (Some(az), Some(el)) => format!(", azimuth {az:.2}°, elevation {el:.2}°"),
-                        (None, Some(el)) => format!(", elevation {el:.2}° (give --north for its azimuth)"),
+                        (None, Some(el)) =>
+                            format!(", elevation {el:.2}° (give --north for its azimuth)"),
                         _ => String::new(),
                     }
                 )),

@@ -76,10 +76,16 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     }
     out.add(&a.output.join("times.txt"), list.into_bytes());
     let truth = a.output.join("truth.hdr");
-    out.add(&truth, crate::radiance::encode(&truth, &b.truth, &HdrMeta::default(), false)?);
+    out.add(
+        &truth,
+        crate::radiance::encode(&truth, &b.truth, &HdrMeta::default(), false)?,
+    );
     let mut csv = String::from("z,g_red,g_green,g_blue\n");
     for z in 0..256 {
-        csv += &format!("{z},{},{},{}\n", b.true_g[0][z], b.true_g[1][z], b.true_g[2][z]);
+        csv += &format!(
+            "{z},{},{},{}\n",
+            b.true_g[0][z], b.true_g[1][z], b.true_g[2][z]
+        );
     }
     out.add(&a.output.join("true_curves.csv"), csv.into_bytes());
     if let Some(c) = b.circle {

@@ -1,0 +1,302 @@
+//! `skydome lens detect|fit`: the fish-eye image circle and the lens projection.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+use skydome::fisheye::{self, AngleRadius, LensKind, LensProfile};
+use skydome::image::Circle;
+use skydome::overlay::OverlayMarks;
+
+use crate::io::{self, BracketArgs, Outputs};
+
+/// Arguments of `skydome lens`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    pub command: LensCommand,
+}
+
+/// `lens` subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum LensCommand {
+    /// Find the centre and radius of the lens's visible circle in a photo (or bracket).
+    Detect(DetectArgs),
+    /// Fit the lens projection and write a lens profile (JSON).
+    Fit(FitArgs),
+}
+
+/// Arguments of `skydome lens detect`.
+#[derive(Debug, clap::Args)]
+pub struct DetectArgs {
+    /// One photo, or a bracket (the best-exposed frame is used).
+    #[arg(required = true, num_args = 1..)]
+    pub images: Vec<PathBuf>,
+    #[command(flatten)]
+    pub bracket: BracketArgs,
+    /// Draw the visible circle and the 180° horizon (for --model/--fov) on the photo (.png/.jpg).
+    #[arg(long, value_name = "FILE")]
+    pub overlay: Option<PathBuf>,
+    /// Lens projection used to place the 180° horizon on the overlay.
+    #[arg(long, value_parser = parse_kind, default_value = "stereographic")]
+    pub model: LensKind,
+    /// Field of view of the lens across the visible circle, degrees.
+    #[arg(long, default_value_t = 235.0)]
+    pub fov: f64,
+    /// Also write a lens profile from the circle, --model and --fov.
+    #[arg(short, long, value_name = "lens.json")]
+    pub output: Option<PathBuf>,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+    /// Replace existing outputs.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Arguments of `skydome lens fit`.
+#[derive(Debug, clap::Args)]
+pub struct FitArgs {
+    /// Measured pairs, CSV lines `angle_deg,radius_px` (the seed's transparent-box procedure).
+    #[arg(long, value_name = "pairs.csv", conflicts_with = "circle")]
+    pub csv: Option<PathBuf>,
+    /// Optical centre (CX,CY) for --csv, or the visible circle (CX,CY,R) for a fit from --fov.
+    #[arg(long, value_name = "CX,CY[,R]")]
+    pub centre: Option<String>,
+    /// The visible circle CX,CY,R (e.g. from `lens detect`): the profile comes from --fov and --model.
+    #[arg(long, value_parser = crate::calibrate::parse_circle, value_name = "CX,CY,R")]
+    pub circle: Option<Circle>,
+    /// Full field of view across the visible circle, degrees.
+    #[arg(long, default_value_t = 235.0)]
+    pub fov: f64,
+    /// Projection: auto (best AICc, with --csv), equidistant, equisolid, stereographic,
+    /// orthographic or polynomial.
+    #[arg(long, default_value = "auto")]
+    pub model: String,
+    /// The lens profile to write.
+    #[arg(short, long, value_name = "lens.json")]
+    pub output: PathBuf,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+    /// Replace an existing output.
+    #[arg(long)]
+    pub force: bool,
+}
+
+fn parse_kind(s: &str) -> Result<LensKind, String> {
+    s.parse::<LensKind>().map_err(|e| e.to_string())
+}
+
+/// The top-level entry point for `skydome lens`.
+pub fn run(a: Args, quiet: bool) -> Result<()> {
+    match a.command {
+        LensCommand::Detect(d) => detect(d, quiet),
+        LensCommand::Fit(f) => fit(f, quiet),
+    }
+}
+
+#[derive(Serialize)]
+struct DetectReport {
+    circle: Circle,
+    residual_px: f64,
+    boundary_points: usize,
+    candidates: usize,
+    horizon: Option<Circle>,
+    crop_ratio: Option<f64>,
+    written: Vec<String>,
+}
+
+fn detect(a: DetectArgs, quiet: bool) -> Result<()> {
+    for o in [a.overlay.as_ref(), a.output.as_ref()]
+        .into_iter()
+        .flatten()
+    {
+        io::check_destination(o, &a.images, a.force)?;
+    }
+    // One photo needs no exposure time: give it a nominal one so the bracket loader can be reused.
+    let br = if a.images.len() == 1 {
+        let p = &a.images[0];
+        let name = p.display().to_string();
+        let d = skydome::bracket::decode(
+            &name,
+            &io::read(p)?,
+            &skydome::bracket::DecodeOptions {
+                max_pixels: a.bracket.max_pixels,
+            },
+        )?;
+        let (w, h) = (d.width, d.height);
+        skydome::bracket::Bracket {
+            frames: vec![skydome::bracket::Frame {
+                name,
+                width: w,
+                height: h,
+                pixels: d.pixels,
+                exposure: skydome::bracket::Exposure {
+                    time_s: 1.0,
+                    iso: None,
+                    f_number: None,
+                },
+            }],
+            info: d.info,
+            warnings: Vec::new(),
+        }
+    } else {
+        io::load_bracket(&a.images, &a.bracket, quiet)?
+    };
+    let photo = crate::geometry::best_exposed(&br);
+    let fit = fisheye::detect_circle(&photo)
+        .with_context(|| format!("{}: circle detection", br.frames[0].name))?;
+    let profile = LensProfile::from_fov(fit.circle, a.fov, a.model).context("lens model")?;
+    let horizon = profile
+        .radius_at_deg(90.0)
+        .ok()
+        .map(|r| Circle { r, ..fit.circle });
+    let mut out = Outputs::default();
+    if let Some(p) = &a.overlay {
+        let mut rgb = photo.clone();
+        skydome::overlay::draw_overlay(
+            &mut rgb,
+            &OverlayMarks {
+                visible: Some(fit.circle),
+                horizon,
+                north: None,
+                sun: None,
+            },
+        );
+        out.add(p, crate::pictures::encode_rgb8(p, &rgb)?);
+    }
+    if let Some(p) = &a.output {
+        out.add(p, profile.to_json().context("lens profile")?.into_bytes());
+    }
+    let written = out.commit(&a.images, a.force)?;
+    let r = DetectReport {
+        circle: fit.circle,
+        residual_px: fit.residual_px,
+        boundary_points: fit.points,
+        candidates: fit.candidates,
+        horizon,
+        crop_ratio: horizon.map(|h| h.r / fit.circle.r),
+        written: written.iter().map(|p| p.display().to_string()).collect(),
+    };
+    if a.json {
+        crate::out(&serde_json::to_string_pretty(&r)?);
+    } else {
+        crate::out(&format!(
+            "circle centre ({:.2}, {:.2}) radius {:.2} px, fit residual {:.2} px RMS over {} of {} boundary points",
+            r.circle.cx, r.circle.cy, r.circle.r, r.residual_px, r.boundary_points, r.candidates
+        ));
+        if let (Some(h), Some(q)) = (r.horizon, r.crop_ratio) {
+            crate::out(&format!(
+                "180° horizon ({} {:.0}° lens): radius {:.2} px = {:.3} of the visible circle",
+                a.model, a.fov, h.r, q
+            ));
+        }
+        for w in &r.written {
+            crate::out(&format!("wrote {w}"));
+        }
+    }
+    Ok(())
+}
+
+fn read_pairs(p: &PathBuf) -> Result<Vec<AngleRadius>> {
+    let name = p.display().to_string();
+    let text = std::fs::read_to_string(p).with_context(|| format!("{name}: cannot read"))?;
+    let mut v = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let f: Vec<&str> = line
+            .split([',', ';', '\t', ' '])
+            .filter(|s| !s.is_empty())
+            .collect();
+        let nums: Option<Vec<f64>> = f.iter().map(|s| s.parse::<f64>().ok()).collect();
+        match nums.as_deref() {
+            Some([a, r]) => v.push(AngleRadius {
+                angle_deg: *a,
+                radius_px: *r,
+            }),
+            // A header line such as "angle_deg,radius_px" is skipped.
+            None if v.is_empty() && i == 0 => continue,
+            _ => bail!(
+                "{name} line {}: expected 'angle_deg,radius_px', got '{line}'",
+                i + 1
+            ),
+        }
+    }
+    Ok(v)
+}
+
+fn parse_centre(s: &str) -> Result<(f64, f64)> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--centre '{s}': expected CX,CY in pixels"))?;
+    match v[..] {
+        [x, y] | [x, y, _] if x.is_finite() && y.is_finite() => Ok((x, y)),
+        _ => bail!("--centre '{s}': expected CX,CY in pixels"),
+    }
+}
+
+fn fit(a: FitArgs, quiet: bool) -> Result<()> {
+    io::check_destination(&a.output, &[], a.force)?;
+    let choice = match a.model.as_str() {
+        "auto" => None,
+        m => Some(parse_kind(m).map_err(anyhow::Error::msg)?),
+    };
+    let profile = match (&a.csv, a.circle) {
+        (Some(csv), None) => {
+            let pairs = read_pairs(csv)?;
+            let (cx, cy) = match &a.centre {
+                Some(c) => parse_centre(c)?,
+                None => bail!("--csv needs --centre CX,CY: the optical centre the radii were measured from"),
+            };
+            let fit = fisheye::fit_projection(&pairs, choice).with_context(|| csv.display().to_string())?;
+            LensProfile::from_fit(cx, cy, a.fov, &fit).context("lens profile")?
+        }
+        (None, Some(c)) => {
+            let kind = choice.unwrap_or(LensKind::Stereographic);
+            LensProfile::from_fov(c, a.fov, kind).context("lens profile")?
+        }
+        _ => bail!("give --csv pairs.csv --centre CX,CY (measured angles), or --circle CX,CY,R with --fov (nominal lens)"),
+    };
+    let mut out = Outputs::default();
+    out.add(
+        &a.output,
+        profile.to_json().context("lens profile")?.into_bytes(),
+    );
+    let written = out.commit(&[], a.force)?;
+    if a.json {
+        crate::out(&profile.to_json()?);
+    } else if !quiet {
+        for c in &profile.candidates {
+            crate::out(&format!(
+                "{:<14} rms {:8.3} px  max {:8.3} px  AICc {:10.2}",
+                c.projection.kind().name(),
+                c.rms_px,
+                c.max_px,
+                c.aicc
+            ));
+        }
+        let r90 = profile.radius_at_deg(90.0).ok();
+        crate::out(&format!(
+            "chose {} ({:.0}° lens), circle ({:.2}, {:.2}) r {:.2} px{}",
+            profile.projection.kind().name(),
+            profile.fov_deg,
+            profile.circle.cx,
+            profile.circle.cy,
+            profile.circle.r,
+            r90.map_or(String::new(), |r| format!(
+                ", 180° crop radius {r:.2} px = {:.3} of the circle",
+                r / profile.circle.r
+            ))
+        ));
+        for w in written {
+            crate::out(&format!("wrote {}", w.display()));
+        }
+    }
+    Ok(())
+}
