@@ -8,6 +8,7 @@
 
 mod calibrate;
 mod compare;
+mod demo;
 
 mod geometry;
 mod info;
@@ -58,14 +59,34 @@ enum Command {
     Histogram(views::HistogramArgs),
     /// A diffuse and a mirror sphere lit by an equirectangular dome (PNG/JPEG).
     Render(views::RenderArgs),
+    /// Run the whole pipeline on the small fish-eye bracket bundled with skydome.
+    Demo(demo::Args),
     /// Write a synthetic fish-eye bracket with known radiance and response (ground truth).
     Synth(synth::Args),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    match dispatch(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // `{:#}` joins the context chain on one line: "error: sky.jpg: cannot decode: …".
+            let msg = format!("{e:#}").replace('\n', " ");
+            eprintln!("error: {msg}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// Parses a full command line (with the program name first) and runs it; `demo` uses this to
+/// run the same commands a user would type.
+pub fn run_args(args: &[String]) -> anyhow::Result<()> {
+    dispatch(Cli::try_parse_from(args)?)
+}
+
+fn dispatch(cli: Cli) -> anyhow::Result<()> {
     let quiet = cli.quiet;
-    let result = match cli.command {
+    match cli.command {
         Command::Calibrate(a) => calibrate::run(a, quiet),
         Command::Merge(a) => merge::run(a, quiet),
         Command::Tonemap(a) => tonemap::run(a, quiet),
@@ -77,15 +98,7 @@ fn main() -> ExitCode {
         Command::Falsecolor(a) => views::falsecolor(a, quiet),
         Command::Histogram(a) => views::histogram(a, quiet),
         Command::Render(a) => views::render(a, quiet),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            // `{:#}` joins the context chain on one line: "error: sky.jpg: cannot decode: …".
-            let msg = format!("{e:#}").replace('\n', " ");
-            eprintln!("error: {msg}");
-            ExitCode::from(1)
-        }
+        Command::Demo(a) => demo::run(a, quiet),
     }
 }
 
