@@ -84,7 +84,9 @@ pub enum PlotError {
     #[error(transparent)]
     Tonemap(#[from] TonemapError),
     /// The embedded font could not be parsed (a build problem, not a user one).
-    #[error("the embedded font could not be loaded; rebuild skydome (assets/DejaVuSans.ttf is damaged)")]
+    #[error(
+        "the embedded font could not be loaded; rebuild skydome (assets/DejaVuSans.ttf is damaged)"
+    )]
     Font,
     /// plotters failed while drawing.
     #[error("drawing failed: {0}")]
@@ -330,7 +332,12 @@ pub fn encode_png_rgb8(img: &RgbImage<u8>) -> Result<Vec<u8>, PlotError> {
 pub fn encode_png_rgb16(img: &RgbImage<u16>) -> Result<Vec<u8>, PlotError> {
     // The `image` encoder takes native-endian samples and writes PNG's big-endian itself.
     let bytes: Vec<u8> = img.data.iter().flat_map(|v| v.to_ne_bytes()).collect();
-    encode_png(&bytes, img.width, img.height, image::ExtendedColorType::Rgb16)
+    encode_png(
+        &bytes,
+        img.width,
+        img.height,
+        image::ExtendedColorType::Rgb16,
+    )
 }
 
 fn encode_png(
@@ -358,7 +365,9 @@ where
     check_size(size)?;
     let mut buf = vec![255u8; 3 * size.0 as usize * size.1 as usize];
     {
-        let bm = BitMapBackend::<plotters::backend::RGBPixel>::with_buffer_and_format(&mut buf, size).map_err(draw_err)?;
+        let bm =
+            BitMapBackend::<plotters::backend::RGBPixel>::with_buffer_and_format(&mut buf, size)
+                .map_err(draw_err)?;
         let root = embedded(bm, true)?.into_drawing_area();
         f(&root)?;
         root.present().map_err(draw_err)?;
@@ -442,6 +451,8 @@ fn draw_response<DB: DrawingBackend>(
         .bold_line_style(RGBColor(215, 215, 215))
         .y_labels(6)
         .x_labels(8)
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .x_label_formatter(&|v| format!("{v:.0}"))
         .draw()
         .map_err(draw_err)?;
     let dot = (w / 400).max(1);
@@ -538,7 +549,9 @@ pub fn log_luminance_histogram_png(
         .collect();
     let xmin = stats.min.log2().floor() - 0.5;
     let xmax = stats.max.log2().ceil() + 0.5;
-    let ymax = bars.iter().map(|b| b.1).max().unwrap_or(1) as f64 * 1.12;
+    // Log counts: the sun is a few hundred pixels beside a few hundred thousand of sky, and must
+    // still show as a bar.
+    let ymax = bars.iter().map(|b| b.1).max().unwrap_or(1) as f64 * 3.0;
     let full = stats.dynamic_range_stops();
     let robust = stats.robust_range_stops(0.1, 99.9);
     render_png(size, |root| {
@@ -546,19 +559,17 @@ pub fn log_luminance_histogram_png(
         let fs = (w as f64 / 40.0).clamp(12.0, 40.0);
         root.fill(&WHITE).map_err(draw_err)?;
         let mut chart = ChartBuilder::on(root)
-            .caption(
-                "Luminance histogram",
-                (FONT_FAMILY, fs * 1.25).into_font(),
-            )
+            .caption("Luminance histogram", (FONT_FAMILY, fs * 1.25).into_font())
             .margin((fs * 0.8) as u32)
             .x_label_area_size((fs * 3.0) as u32)
             .y_label_area_size((fs * 4.2) as u32)
-            .build_cartesian_2d(xmin..xmax, 0f64..ymax)
+            .build_cartesian_2d(xmin..xmax, (0.7f64..ymax).log_scale())
             .map_err(draw_err)?;
         chart
             .configure_mesh()
+            .x_label_formatter(&|v| format!("{v:.0}"))
             .x_desc("log₂ luminance (stops, relative)")
-            .y_desc("pixels per ¼ stop")
+            .y_desc("pixels per ¼ stop (log scale)")
             .axis_desc_style((FONT_FAMILY, fs))
             .label_style((FONT_FAMILY, fs * 0.85))
             .light_line_style(RGBColor(240, 240, 240))
@@ -570,7 +581,7 @@ pub fn log_luminance_histogram_png(
         chart
             .draw_series(
                 bars.iter()
-                    .map(|&(x, n)| Rectangle::new([(x, 0.0), (x + 0.25, n as f64)], fill)),
+                    .map(|&(x, n)| Rectangle::new([(x, 0.7), (x + 0.25, n as f64)], fill)),
             )
             .map_err(draw_err)?;
         let text = [
@@ -580,13 +591,17 @@ pub fn log_luminance_histogram_png(
         ];
         let area = chart.plotting_area();
         let (px, py) = area.get_pixel_range();
-        let style = TextStyle::from((FONT_FAMILY, fs * 0.95).into_font())
-            .pos(plotters::style::text_anchor::Pos::new(HPos::Right, VPos::Top));
+        let style = TextStyle::from((FONT_FAMILY, fs * 0.95).into_font()).pos(
+            plotters::style::text_anchor::Pos::new(HPos::Right, VPos::Top),
+        );
         for (i, t) in text.iter().enumerate() {
             root.draw_text(
                 t,
                 &style,
-                (px.end - (fs * 0.6) as i32, py.start + (fs * (0.5 + 1.3 * i as f64)) as i32),
+                (
+                    px.end - (fs * 0.6) as i32,
+                    py.start + (fs * (0.5 + 1.3 * i as f64)) as i32,
+                ),
             )
             .map_err(draw_err)?;
         }
@@ -755,12 +770,17 @@ fn draw_colour_bar(
     let y_of = |v: f64| {
         y_top as f64 + (1.0 - (v.log10() - llo) / (lhi - llo)) * (y_bot - y_top - 1) as f64
     };
-    let bm = BitMapBackend::<plotters::backend::RGBPixel>::with_buffer_and_format(&mut out.data, (w, h)).map_err(draw_err)?;
+    let bm =
+        BitMapBackend::<plotters::backend::RGBPixel>::with_buffer_and_format(&mut out.data, (w, h))
+            .map_err(draw_err)?;
     let root = embedded(bm, true)?.into_drawing_area();
     let white = RGBColor(235, 235, 235);
     let style = TextStyle::from((FONT_FAMILY, fs).into_font())
         .color(&white)
-        .pos(plotters::style::text_anchor::Pos::new(HPos::Left, VPos::Center));
+        .pos(plotters::style::text_anchor::Pos::new(
+            HPos::Left,
+            VPos::Center,
+        ));
     root.draw(&Rectangle::new(
         [(x0 as i32 - 1, y_top as i32 - 1), (x1 as i32, y_bot as i32)],
         white.stroke_width(1),
@@ -768,7 +788,11 @@ fn draw_colour_bar(
     .map_err(draw_err)?;
     // Ticks at every decade, plus 2× and 5× when the bar spans under three decades.
     let span = lhi - llo;
-    let mults: &[f64] = if span < 3.01 { &[1.0, 2.0, 5.0] } else { &[1.0] };
+    let mults: &[f64] = if span < 3.01 {
+        &[1.0, 2.0, 5.0]
+    } else {
+        &[1.0]
+    };
     let mut d = llo.floor() as i32;
     while (d as f64) <= lhi.ceil() {
         for &m in mults {
@@ -791,8 +815,15 @@ fn draw_colour_bar(
     }
     let title = TextStyle::from((FONT_FAMILY, fs).into_font())
         .color(&white)
-        .pos(plotters::style::text_anchor::Pos::new(HPos::Left, VPos::Top));
-    let label = if absolute { "L (cd/m²)" } else { "L (relative)" };
+        .pos(plotters::style::text_anchor::Pos::new(
+            HPos::Left,
+            VPos::Top,
+        ));
+    let label = if absolute {
+        "L (cd/m²)"
+    } else {
+        "L (relative)"
+    };
     root.draw_text(label, &title, (x0 as i32, (fs * 0.6) as i32))
         .map_err(draw_err)?;
     root.present().map_err(draw_err)?;

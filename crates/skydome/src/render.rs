@@ -44,6 +44,10 @@
 //! Environment Maps", SIGGRAPH 2001; P. Debevec, "Rendering Synthetic Objects into Real Scenes",
 //! SIGGRAPH 1998.
 
+// Small fixed-size vector and SH-coefficient loops read as the formulas they implement when
+// indexed; iterator chains over parallel arrays would hide that.
+#![allow(clippy::needless_range_loop)]
+
 use std::f64::consts::PI;
 
 use crate::image::{luminance, HdrImage, RgbImage};
@@ -99,7 +103,7 @@ pub fn direction_from_azimuth_elevation(az_deg: f64, el_deg: f64) -> [f64; 3] {
 /// The zero vector maps to the zenith `(0, 0)`.
 pub fn direction_to_equirect_uv(d: [f64; 3]) -> (f64, f64) {
     let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    if !(n > 0.0) {
+    if n.is_nan() || n <= 0.0 {
         return (0.0, 0.0);
     }
     let el = (d[2] / n).clamp(-1.0, 1.0).asin();
@@ -353,7 +357,7 @@ pub struct SphereScene {
     pub view_azimuth_deg: f64,
     /// Horizontal field of view in degrees (1..=150).
     pub fov_deg: f64,
-    /// Diffuse sphere albedo (0..=1).
+    /// Diffuse sphere albedo (0..=1); 0.18 by default, the on-set 18 % grey ball.
     pub sphere_albedo: f64,
     /// Mirror sphere reflectance (0..=1).
     pub mirror_reflectance: f64,
@@ -370,9 +374,9 @@ impl Default for SphereScene {
             height: 320,
             view_azimuth_deg: 0.0,
             fov_deg: 45.0,
-            sphere_albedo: 0.8,
+            sphere_albedo: 0.18,
             mirror_reflectance: 0.85,
-            ground_albedo: 0.3,
+            ground_albedo: 0.2,
             samples_per_axis: 2,
         }
     }
@@ -476,10 +480,18 @@ impl SphereScene {
             return bad("height", self.height as f64, "use 16..=8192 px");
         }
         if !(self.fov_deg >= 1.0 && self.fov_deg <= 150.0) {
-            return bad("fov", self.fov_deg, "use a horizontal field of view of 1..=150°");
+            return bad(
+                "fov",
+                self.fov_deg,
+                "use a horizontal field of view of 1..=150°",
+            );
         }
         if !self.view_azimuth_deg.is_finite() {
-            return bad("view azimuth", self.view_azimuth_deg, "use a finite azimuth in degrees");
+            return bad(
+                "view azimuth",
+                self.view_azimuth_deg,
+                "use a finite azimuth in degrees",
+            );
         }
         for (name, v) in [
             ("sphere albedo", self.sphere_albedo),
@@ -491,7 +503,11 @@ impl SphereScene {
             }
         }
         if !(1..=8).contains(&self.samples_per_axis) {
-            return bad("samples", self.samples_per_axis as f64, "use 1..=8 rays per axis");
+            return bad(
+                "samples",
+                self.samples_per_axis as f64,
+                "use 1..=8 rays per axis",
+            );
         }
         Ok(())
     }
@@ -644,7 +660,11 @@ impl Shader<'_> {
                 }
             }
         }
-        let t_ground = if d[2] < 0.0 { -o[2] / d[2] } else { f64::INFINITY };
+        let t_ground = if d[2] < 0.0 {
+            -o[2] / d[2]
+        } else {
+            f64::INFINITY
+        };
         match best {
             Some((t, i)) if t < t_ground => {
                 let p = add(o, scale(d, t));

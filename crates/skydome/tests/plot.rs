@@ -3,13 +3,13 @@
 
 use std::path::PathBuf;
 
-use skydome::image::{luminance, Circle, HdrImage};
+use skydome::image::{Circle, HdrImage};
 use skydome::plot::{
     encode_png_rgb16, encode_png_rgb8, false_colour, false_colour_ramp,
     log_luminance_histogram_png, response_curves_png, response_curves_svg, FalseColour, PlotError,
 };
 use skydome::render::{equirect_uv_to_direction, render_spheres, SphereScene};
-use skydome::tonemap::{tonemap_u16, tonemap_u8, luminance_stats, ToneMap};
+use skydome::tonemap::{luminance_stats, tonemap_u16, tonemap_u8, ToneMap};
 
 fn pictures_dir() -> PathBuf {
     let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/pictures");
@@ -25,7 +25,8 @@ fn synthetic_sky(w: usize) -> HdrImage {
     let sun = equirect_uv_to_direction(200.0 / 360.0, 0.5 - 40.0 / 180.0);
     for y in 0..h / 2 {
         for x in 0..w {
-            let d = equirect_uv_to_direction((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64);
+            let d =
+                equirect_uv_to_direction((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64);
             let el = d[2].asin() as f32;
             let az = 2.0 * std::f32::consts::PI * (x as f32 + 0.5) / w as f32;
             let t = 1.0 - el / std::f32::consts::FRAC_PI_2;
@@ -81,7 +82,10 @@ fn fisheye_of(sky: &HdrImage, size: usize) -> (HdrImage, Circle) {
 
 /// Response curves of a camera with `Z = 255 (X / X_c)^(1/2.2)`, so `g(Z) = 2.2 ln(Z/255) +
 /// ln X_c`, and samples from three exposures.
-fn synthetic_response() -> ([Vec<f64>; 3], [Vec<(f64, u8)>; 3]) {
+/// Per-channel `g(Z)` curves and `(ln E·Δt, Z)` samples.
+type ResponseData = ([Vec<f64>; 3], [Vec<(f64, u8)>; 3]);
+
+fn synthetic_response() -> ResponseData {
     let lnx = [0.3f64, 0.0, -0.4];
     let curves = lnx.map(|c| {
         (0..256)
@@ -92,7 +96,9 @@ fn synthetic_response() -> ([Vec<f64>; 3], [Vec<(f64, u8)>; 3]) {
     let mut seed = 12345u64;
     for (c, s) in samples.iter_mut().enumerate() {
         for i in 0..120 {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             let ln_e = -6.0 + 6.0 * (seed >> 11) as f64 / (1u64 << 53) as f64;
             for ln_dt in [-2.079, 0.0, 2.079] {
                 let x = ln_e + ln_dt;
@@ -116,10 +122,22 @@ fn response_curves_render_as_png_and_svg_with_labels() {
     assert_eq!(img.dimensions(), (900, 650));
     // Each channel colour appears (the curves), and text pixels (dark grey) too.
     let count = |f: &dyn Fn(&image::Rgb<u8>) -> bool| img.pixels().filter(|p| f(p)).count();
-    assert!(count(&|p| p[0] > 150 && p[1] < 80 && p[2] < 80) > 500, "red curve");
-    assert!(count(&|p| p[1] > 110 && p[0] < 60 && p[2] < 90) > 500, "green curve");
-    assert!(count(&|p| p[2] > 160 && p[0] < 80 && p[1] < 110) > 500, "blue curve");
-    assert!(count(&|p| p[0] < 60 && p[1] < 60 && p[2] < 60) > 2000, "axes and text");
+    assert!(
+        count(&|p| p[0] > 150 && p[1] < 80 && p[2] < 80) > 500,
+        "red curve"
+    );
+    assert!(
+        count(&|p| p[1] > 110 && p[0] < 60 && p[2] < 90) > 500,
+        "green curve"
+    );
+    assert!(
+        count(&|p| p[2] > 160 && p[0] < 80 && p[1] < 110) > 500,
+        "blue curve"
+    );
+    assert!(
+        count(&|p| p[0] < 60 && p[1] < 60 && p[2] < 60) > 2000,
+        "axes and text"
+    );
     std::fs::write(pictures_dir().join("response_curves.png"), &png).unwrap();
     let svg = response_curves_svg(&curves, s, (900, 650)).unwrap();
     assert!(svg.starts_with("<svg"));
@@ -141,7 +159,11 @@ fn response_plot_rejects_short_or_non_finite_curves() {
     curves[1] = vec![0.0; 100];
     assert!(matches!(
         response_curves_svg(&curves, s, (800, 600)),
-        Err(PlotError::BadCurve { channel: 1, len: 100, .. })
+        Err(PlotError::BadCurve {
+            channel: 1,
+            len: 100,
+            ..
+        })
     ));
     let (curves, _) = synthetic_response();
     assert!(matches!(
@@ -179,7 +201,10 @@ fn false_colour_maps_luminance_decades_to_the_ramp_and_keeps_masked_pixels_black
         let want = false_colour_ramp(t);
         let got = out.pixel(x, 150);
         for c in 0..3 {
-            assert!((got[c] as i32 - want[c] as i32).abs() <= 1, "x={x}: {got:?} vs {want:?}");
+            assert!(
+                (got[c] as i32 - want[c] as i32).abs() <= 1,
+                "x={x}: {got:?} vs {want:?}"
+            );
         }
     }
     assert_eq!(out.pixel(5, 5), [0; 3], "outside the mask");
@@ -220,13 +245,19 @@ fn pictures_of_every_kind_are_written_for_inspection() {
             ..ToneMap::with_operator(op.parse().unwrap())
         };
         let out = tonemap_u8(&fish, &tm).unwrap();
-        std::fs::write(dir.join(format!("preview_{op}.png")), encode_png_rgb8(&out).unwrap())
-            .unwrap();
+        std::fs::write(
+            dir.join(format!("preview_{op}.png")),
+            encode_png_rgb8(&out).unwrap(),
+        )
+        .unwrap();
     }
     let out16 = tonemap_u16(&fish, &ToneMap::default()).unwrap();
     let png16 = encode_png_rgb16(&out16).unwrap();
     let back = image::load_from_memory(&png16).unwrap().into_rgb16();
-    assert!(back.as_raw() == &out16.data, "16-bit PNG does not round-trip");
+    assert!(
+        back.as_raw() == &out16.data,
+        "16-bit PNG does not round-trip"
+    );
     std::fs::write(dir.join("preview_aces_16bit.png"), png16).unwrap();
 
     // False colour, relative and in cd/m² (pretend 1 unit = 2000 cd/m²).
@@ -248,7 +279,11 @@ fn pictures_of_every_kind_are_written_for_inspection() {
         },
     )
     .unwrap();
-    std::fs::write(dir.join("false_colour_cdm2.png"), encode_png_rgb8(&fc_abs).unwrap()).unwrap();
+    std::fs::write(
+        dir.join("false_colour_cdm2.png"),
+        encode_png_rgb8(&fc_abs).unwrap(),
+    )
+    .unwrap();
 
     // Histogram.
     let hist = log_luminance_histogram_png(&fish, Some(&circle), (900, 500)).unwrap();
@@ -276,9 +311,12 @@ fn pictures_of_every_kind_are_written_for_inspection() {
         &ToneMap::default(),
     )
     .unwrap();
-    std::fs::write(dir.join("spheres_backlit.png"), encode_png_rgb8(&back_lit).unwrap()).unwrap();
+    std::fs::write(
+        dir.join("spheres_backlit.png"),
+        encode_png_rgb8(&back_lit).unwrap(),
+    )
+    .unwrap();
     // The sky itself, lat-long.
     let ll = tonemap_u8(&sky, &ToneMap::default()).unwrap();
     std::fs::write(dir.join("sky_latlong.png"), encode_png_rgb8(&ll).unwrap()).unwrap();
-    let _ = luminance([0.0; 3]);
 }

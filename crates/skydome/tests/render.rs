@@ -28,7 +28,8 @@ fn sky_with_sun(w: usize, az: f64, el: f64, radius_deg: f64, sun_l: f32) -> HdrI
     let cos_r = radius_deg.to_radians().cos();
     for y in 0..h {
         for x in 0..w {
-            let d = equirect_uv_to_direction((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64);
+            let d =
+                equirect_uv_to_direction((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64);
             if d[2] < 0.0 {
                 continue;
             }
@@ -55,7 +56,10 @@ fn equirect_convention_north_at_u0_east_at_quarter_south_at_half_zenith_on_top()
     ];
     for (d, (u, v)) in cases {
         let (gu, gv) = direction_to_equirect_uv(d);
-        assert!((gu - u).abs() < 1e-12 && (gv - v).abs() < 1e-12, "{d:?} → ({gu}, {gv})");
+        assert!(
+            (gu - u).abs() < 1e-12 && (gv - v).abs() < 1e-12,
+            "{d:?} → ({gu}, {gv})"
+        );
     }
     let e = direction_from_azimuth_elevation(90.0, 0.0);
     assert!((e[0] - 1.0).abs() < 1e-12, "azimuth 90° is east: {e:?}");
@@ -63,7 +67,10 @@ fn equirect_convention_north_at_u0_east_at_quarter_south_at_half_zenith_on_top()
         let u = (i as f64 * 0.137) % 1.0;
         let v = 0.01 + 0.98 * ((i as f64 * 0.291) % 1.0);
         let (gu, gv) = direction_to_equirect_uv(equirect_uv_to_direction(u, v));
-        assert!((gu - u).abs() < 1e-9 && (gv - v).abs() < 1e-9, "({u},{v}) → ({gu},{gv})");
+        assert!(
+            (gu - u).abs() < 1e-9 && (gv - v).abs() < 1e-9,
+            "({u},{v}) → ({gu},{gv})"
+        );
     }
 }
 
@@ -81,7 +88,11 @@ fn sh_irradiance_of_uniform_light_is_pi_times_radiance() {
         let e = sh.irradiance(n);
         for k in 0..3 {
             let want = PI * l[k] as f64;
-            assert!((e[k] / want - 1.0).abs() < 0.01, "n={n:?}: {} vs {want}", e[k]);
+            assert!(
+                (e[k] / want - 1.0).abs() < 0.01,
+                "n={n:?}: {} vs {want}",
+                e[k]
+            );
         }
     }
 }
@@ -178,7 +189,11 @@ fn reflected_pixel(scene: &SphereScene, s: [f64; 3]) -> (f64, f64) {
 
 #[test]
 fn mirror_sphere_shows_the_sun_at_its_reflected_direction() {
-    for (view, sun_az, sun_el) in [(0.0, 180.0, 30.0), (20.0, 150.0, 50.0), (250.0, 100.0, 20.0)] {
+    for (view, sun_az, sun_el) in [
+        (0.0, 180.0, 30.0),
+        (20.0, 150.0, 50.0),
+        (250.0, 100.0, 20.0),
+    ] {
         let scene = SphereScene {
             view_azimuth_deg: view,
             width: 480,
@@ -245,7 +260,11 @@ fn diffuse_sphere_is_brighter_on_the_sunny_side_and_the_ground_shows_its_shadow(
     let front = render_spheres_hdr(&sky_with_sun(512, 200.0, 40.0, 1.5, 20_000.0), &scene).unwrap();
     let lit = [d.centre[0], d.centre[1], d.centre[2] + 0.7];
     let dark = [d.centre[0], d.centre[1], d.centre[2] - 0.9];
-    println!("diffuse sphere: sunny side {:.3}, underside {:.3}", px(&front, lit), px(&front, dark));
+    println!(
+        "diffuse sphere: sunny side {:.3}, underside {:.3}",
+        px(&front, lit),
+        px(&front, dark)
+    );
     assert!(px(&front, lit) > 3.0 * px(&front, dark));
     // Shadow of the mirror sphere's centre on the ground, versus the nearest visible ground
     // point that both spheres leave in the sun.
@@ -254,14 +273,20 @@ fn diffuse_sphere_is_brighter_on_the_sunny_side_and_the_ground_shows_its_shadow(
     let shadow = [m.centre[0] - t * s[0], m.centre[1] - t * s[1], 0.0];
     let hits = |o: [f64; 3], dir: [f64; 3]| {
         [d, m].iter().any(|sp| {
-            let oc = [o[0] - sp.centre[0], o[1] - sp.centre[1], o[2] - sp.centre[2]];
+            let oc = [
+                o[0] - sp.centre[0],
+                o[1] - sp.centre[1],
+                o[2] - sp.centre[2],
+            ];
             let b = dot(oc, dir);
             let disc = b * b - (dot(oc, oc) - sp.radius * sp.radius);
             disc >= 0.0 && -b + disc.sqrt() > 0.0
         })
     };
     let visible = |p: [f64; 3]| {
-        let Some((x, y)) = cam.project(p) else { return false };
+        let Some((x, y)) = cam.project(p) else {
+            return false;
+        };
         let dir = norm([
             p[0] - cam.position[0],
             p[1] - cam.position[1],
@@ -281,7 +306,11 @@ fn diffuse_sphere_is_brighter_on_the_sunny_side_and_the_ground_shows_its_shadow(
         }
     }
     let beside = beside.expect("a sunlit ground point near the shadow");
-    println!("ground in shadow {:.4} vs in sun {:.4}", px(&img, shadow), px(&img, beside));
+    println!(
+        "ground in shadow {:.4} vs in sun {:.4}",
+        px(&img, shadow),
+        px(&img, beside)
+    );
     assert!(px(&img, shadow) < 0.5 * px(&img, beside));
 }
 
