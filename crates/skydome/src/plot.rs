@@ -451,6 +451,8 @@ fn draw_response<DB: DrawingBackend>(
         .bold_line_style(RGBColor(215, 215, 215))
         .y_labels(6)
         .x_labels(8)
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .x_label_formatter(&|v| format!("{v:.0}"))
         .draw()
         .map_err(draw_err)?;
     let dot = (w / 400).max(1);
@@ -547,7 +549,9 @@ pub fn log_luminance_histogram_png(
         .collect();
     let xmin = stats.min.log2().floor() - 0.5;
     let xmax = stats.max.log2().ceil() + 0.5;
-    let ymax = bars.iter().map(|b| b.1).max().unwrap_or(1) as f64 * 1.12;
+    // Log counts: the sun is a few hundred pixels beside a few hundred thousand of sky, and must
+    // still show as a bar.
+    let ymax = bars.iter().map(|b| b.1).max().unwrap_or(1) as f64 * 3.0;
     let full = stats.dynamic_range_stops();
     let robust = stats.robust_range_stops(0.1, 99.9);
     render_png(size, |root| {
@@ -559,12 +563,13 @@ pub fn log_luminance_histogram_png(
             .margin((fs * 0.8) as u32)
             .x_label_area_size((fs * 3.0) as u32)
             .y_label_area_size((fs * 4.2) as u32)
-            .build_cartesian_2d(xmin..xmax, 0f64..ymax)
+            .build_cartesian_2d(xmin..xmax, (0.7f64..ymax).log_scale())
             .map_err(draw_err)?;
         chart
             .configure_mesh()
+            .x_label_formatter(&|v| format!("{v:.0}"))
             .x_desc("log₂ luminance (stops, relative)")
-            .y_desc("pixels per ¼ stop")
+            .y_desc("pixels per ¼ stop (log scale)")
             .axis_desc_style((FONT_FAMILY, fs))
             .label_style((FONT_FAMILY, fs * 0.85))
             .light_line_style(RGBColor(240, 240, 240))
@@ -576,7 +581,7 @@ pub fn log_luminance_histogram_png(
         chart
             .draw_series(
                 bars.iter()
-                    .map(|&(x, n)| Rectangle::new([(x, 0.0), (x + 0.25, n as f64)], fill)),
+                    .map(|&(x, n)| Rectangle::new([(x, 0.7), (x + 0.25, n as f64)], fill)),
             )
             .map_err(draw_err)?;
         let text = [

@@ -47,6 +47,10 @@
 //! Environment Maps", SIGGRAPH 2001; P. Debevec, "Rendering Synthetic Objects into Real Scenes",
 //! SIGGRAPH 1998.
 
+// Small fixed-size vector and SH-coefficient loops read as the formulas they implement when
+// indexed; iterator chains over parallel arrays would hide that.
+#![allow(clippy::needless_range_loop)]
+
 use std::f64::consts::PI;
 
 use crate::image::{luminance, HdrImage, RgbImage};
@@ -102,7 +106,7 @@ pub fn direction_from_azimuth_elevation(az_deg: f64, el_deg: f64) -> [f64; 3] {
 /// centre `u = ½`), `v = 0.5 − e/π ∈ [0, 1]`. The zero vector maps to the zenith `(¼, 0)`.
 pub fn direction_to_equirect_uv(d: [f64; 3]) -> (f64, f64) {
     let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    if !(n > 0.0) {
+    if n.is_nan() || n <= 0.0 {
         return (0.25, 0.0);
     }
     let el = (d[2] / n).clamp(-1.0, 1.0).asin();
@@ -356,7 +360,7 @@ pub struct SphereScene {
     pub view_azimuth_deg: f64,
     /// Horizontal field of view in degrees (1..=150).
     pub fov_deg: f64,
-    /// Diffuse sphere albedo (0..=1).
+    /// Diffuse sphere albedo (0..=1); 0.18 by default, the on-set 18 % grey ball.
     pub sphere_albedo: f64,
     /// Mirror sphere reflectance (0..=1).
     pub mirror_reflectance: f64,
@@ -373,9 +377,9 @@ impl Default for SphereScene {
             height: 320,
             view_azimuth_deg: 0.0,
             fov_deg: 45.0,
-            sphere_albedo: 0.8,
+            sphere_albedo: 0.18,
             mirror_reflectance: 0.85,
-            ground_albedo: 0.3,
+            ground_albedo: 0.2,
             samples_per_axis: 2,
         }
     }

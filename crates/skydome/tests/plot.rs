@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use skydome::image::{luminance, Circle, HdrImage};
+use skydome::image::{Circle, HdrImage};
 use skydome::plot::{
     encode_png_rgb16, encode_png_rgb8, false_colour, false_colour_ramp,
     log_luminance_histogram_png, response_curves_png, response_curves_svg, FalseColour, PlotError,
@@ -82,7 +82,10 @@ fn fisheye_of(sky: &HdrImage, size: usize) -> (HdrImage, Circle) {
 
 /// Response curves of a camera with `Z = 255 (X / X_c)^(1/2.2)`, so `g(Z) = 2.2 ln(Z/255) +
 /// ln X_c`, and samples from three exposures.
-fn synthetic_response() -> ([Vec<f64>; 3], [Vec<(f64, u8)>; 3]) {
+/// Per-channel `g(Z)` curves and `(ln E·Δt, Z)` samples.
+type ResponseData = ([Vec<f64>; 3], [Vec<(f64, u8)>; 3]);
+
+fn synthetic_response() -> ResponseData {
     let lnx = [0.3f64, 0.0, -0.4];
     let curves = lnx.map(|c| {
         (0..256)
@@ -316,5 +319,4 @@ fn pictures_of_every_kind_are_written_for_inspection() {
     // The sky itself, lat-long.
     let ll = tonemap_u8(&sky, &ToneMap::default()).unwrap();
     std::fs::write(dir.join("sky_latlong.png"), encode_png_rgb8(&ll).unwrap()).unwrap();
-    let _ = luminance([0.0; 3]);
 }
