@@ -10,7 +10,8 @@ How to run (from the repository root):
 The example writes the frames (PNG, the exact pixels skydome saw), `times.txt`, the true
 radiance `truth.pfm`, the true curves `true_curves.csv`, skydome's merge `skydome_merged.pfm`
 and curves `skydome_curves.csv`. This script runs OpenCV's CalibrateDebevec (same sample count
-as skydome used, lambda 10, OpenCV's default grid sampling) and MergeDebevec on the same PNGs,
+and lambda as skydome used — override with `--samples N` / `--lambda L` — and OpenCV's default
+grid sampling) and MergeDebevec on the same PNGs,
 then prints, for OpenCV, OpenCV's merge with skydome's curve, and skydome:
 
 - curve RMSE in stops: RMS over z = 10..245 of (g_rec - g_true) / ln 2 after removing the mean;
@@ -66,6 +67,11 @@ def main():
     as_json = "--json" in args
     args = [a for a in args if a != "--json"]
     samples = None
+    lam_arg = None
+    if "--lambda" in args:
+        i = args.index("--lambda")
+        lam_arg = float(args[i + 1])
+        del args[i : i + 2]
     if "--samples" in args:
         i = args.index("--samples")
         samples = int(args[i + 1])
@@ -87,7 +93,8 @@ def main():
     for im in rgb:
         mask |= np.all((im >= 10) & (im <= 245), axis=2)
 
-    cal = cv2.createCalibrateDebevec(samples, 10.0)
+    lam = float(rep.get("lambda", 10.0)) if lam_arg is None else lam_arg
+    cal = cv2.createCalibrateDebevec(samples, lam)
     resp = cal.process(imgs, times)  # 256x1x3, BGR, linear exposure
     g_cv = np.log(np.maximum(resp[:, 0, ::-1].astype(np.float64), 1e-30))
     hdr_cv = cv2.createMergeDebevec().process(imgs, times, resp)[:, :, ::-1].astype(np.float64)
@@ -99,6 +106,7 @@ def main():
 
     out = {
         "samples": samples,
+        "lambda": lam,
         "opencv": {"curve_rmse_stops": curve_rmse_stops(g_cv, g_true), **merge_metrics(hdr_cv, truth, mask)},
         "opencv_merge_with_skydome_curve": merge_metrics(hdr_cv_ours, truth, mask),
         "opencv_merge_with_true_curve": merge_metrics(hdr_cv_true, truth, mask),
@@ -107,7 +115,7 @@ def main():
     if as_json:
         print(json.dumps(out, indent=2))
         return
-    print(f"OpenCV {cv2.__version__}, {samples} samples, {len(imgs)} frames, {out['skydome']['pixels']} pixels")
+    print(f"OpenCV {cv2.__version__}, lambda {lam}, {samples} samples, {len(imgs)} frames, {out['skydome']['pixels']} pixels")
     print(f"{'':34} {'curve RMSE R/G/B (stops)':>28} {'median rel':>10} {'p95 rel':>8} {'log2 RMSE':>9}")
     for name, key in [("OpenCV Calibrate+MergeDebevec", "opencv"),
                       ("OpenCV merge, skydome curve", "opencv_merge_with_skydome_curve"),

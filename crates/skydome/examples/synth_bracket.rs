@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo run -p skydome --example synth_bracket -- OUTDIR [--size 512] [--seed 1]
-//!     [--samples 100] [--lambda 10] [--quality 92 | --png] [--full-well E] [--read-noise E] [--no-shot-noise]
+//!     [--samples 100] [--lambda 30] [--edge 8] [--quality 92 | --png] [--full-well E] [--read-noise E] [--no-shot-noise]
 //! ```
 //!
 //! Writes into `OUTDIR`:
@@ -12,7 +12,7 @@
 //! - `truth.pfm`: the true radiance (little-endian PFM, bottom row first, as PFM requires);
 //! - `true_curves.csv`: `z,g_r,g_g,g_b` with the true `g(z) = ln f⁻¹(z/255)`;
 //! - `skydome_merged.pfm`, `skydome_curves.csv`: skydome's calibration (robust sampling,
-//!   λ = 10) and merge (hat weighting) of the frames;
+//!   λ = 30) and merge (hat weighting) of the frames;
 //! - `skydome_report.json`: sampling report, curve RMSE and merge metrics against the truth.
 //!
 //! `scripts/opencv_compare.py` runs OpenCV on the same files and prints both side by side.
@@ -57,7 +57,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut out = None;
     let mut opts = SynthOptions::default();
     let mut samples = 100usize;
-    let mut lambda = 10.0f64;
+    let mut lambda = CalibrateOptions::default().lambda;
+    let mut edge = None;
     while let Some(a) = args.next() {
         let mut val = || args.next().ok_or(format!("{a} needs a value"));
         match a.as_str() {
@@ -69,6 +70,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--seed" => opts.seed = val()?.parse()?,
             "--samples" => samples = val()?.parse()?,
             "--lambda" => lambda = val()?.parse()?,
+            "--edge" => edge = Some(val()?.parse()?),
             "--quality" => opts.jpeg_quality = Some(val()?.parse()?),
             "--png" => opts.jpeg_quality = None,
             "--full-well" => opts.full_well = val()?.parse()?,
@@ -78,7 +80,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             _ => return Err(format!("unknown argument {a}").into()),
         }
     }
-    let out = out.ok_or("usage: synth_bracket OUTDIR [--size N] [--seed S] [--samples N] [--lambda L] [--quality Q | --png] [--full-well E] [--read-noise E] [--no-shot-noise]")?;
+    let out = out.ok_or("usage: synth_bracket OUTDIR [--size N] [--seed S] [--samples N] [--lambda L] [--edge CODES] [--quality Q | --png] [--full-well E] [--read-noise E] [--no-shot-noise]")?;
     let dir = Path::new(&out);
     std::fs::create_dir_all(dir)?;
     let b = generate(&opts)?;
@@ -100,6 +102,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut co = CalibrateOptions::default();
     co.sampling.samples = samples;
     co.lambda = lambda;
+    if let Some(e) = edge {
+        co.sampling.edge_threshold = e;
+    }
     let cal = calibrate(&b.frames, b.circle, &co)?;
     let merged = merge(&b.frames, &cal.response, &MergeOptions::default())?;
     write_pfm(&dir.join("skydome_merged.pfm"), &merged.radiance)?;
@@ -117,6 +122,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .map(|c| curve_rmse_stops(cal.response.curve(c), &b.true_g[c]))
         .collect();
     let json = serde_json::json!({
+        "lambda": lambda,
         "sampling": cal.report(),
         "curve_rmse_stops": rmse,
         "merge_vs_truth": report,

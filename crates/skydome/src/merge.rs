@@ -29,7 +29,8 @@
 //! ## 16-bit input
 //! Merged through a 65 536-entry table per frame and channel (1.5 MB per frame): `g` is
 //! interpolated at `v / 257` (exact for [`Response::linear`]) and the hat is evaluated at the
-//! continuous `v / 257`, so the extra precision of 16-bit input is kept.
+//! continuous `v / 257` (full weight stays 127), so the extra precision of 16-bit input is kept
+//! and a 16-bit value `257 · z` merges exactly like the 8-bit code `z`.
 //!
 //! ## Speed
 //! Per frame a table of `(w, w · (g − ln Δt))` pairs replaces all per-pixel `ln` and weight
@@ -179,7 +180,7 @@ pub fn merge(
                 .collect();
             let lut = build_lut16(response, &lt, opts.weighting);
             let hat_lut: Vec<f32> = (0..65536)
-                .map(|v| hat_f(v as f32 / 257.0) / 127.5)
+                .map(|v| hat_f(v as f32 / 257.0) / W_MAX)
                 .collect();
             run_bands(
                 &srcs, &lut, 65536, &hat_lut, w, &mut out, &mut conf, &mut clip, extras,
@@ -264,7 +265,7 @@ fn build_lut16(response: &Response, lt: &[f64], weighting: Weighting) -> Vec<[f3
         for c in 0..3 {
             for v in 0..=u16::MAX {
                 let z = v as f32 / 257.0;
-                let w = weight(z, j, p, weighting, 127.5, hat_f(z));
+                let w = weight(z, j, p, weighting, W_MAX, hat_f(z));
                 lut.push([w, w * (response.g16(c, v) - l) as f32]);
             }
         }

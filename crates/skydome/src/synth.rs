@@ -100,9 +100,10 @@ pub struct SynthOptions {
 }
 
 impl Default for SynthOptions {
-    /// 512 × 512 fish-eye, EV −2, 0, +2 around 1/250 s, seed 1, JPEG quality 92, a phone-like
-    /// sensor (full well 4000 e⁻, read noise 3 e⁻), γ = 2.0 / 2.2 / 2.5 with shoulders
-    /// 0.5 / 0.8 / 1.2.
+    /// The reference accuracy bracket of `docs/accuracy.md`: 512 × 512 fish-eye, EV −2, 0, +2
+    /// around 1/250 s, seed 1, JPEG quality 97, a low-noise sensor (full well 400 000 e⁻, read
+    /// noise 1 e⁻; a phone-like 4000 e⁻ / 3 e⁻ is far noisier), γ = 2.0 / 2.2 / 2.5 with
+    /// shoulders 0.5 / 0.8 / 1.2.
     fn default() -> Self {
         Self {
             width: 512,
@@ -111,10 +112,10 @@ impl Default for SynthOptions {
             base_time_s: 1.0 / 250.0,
             seed: 1,
             fisheye: true,
-            jpeg_quality: Some(92),
-            full_well: 4000.0,
+            jpeg_quality: Some(97),
+            full_well: 400_000.0,
             shot_noise: true,
-            read_noise: 3.0,
+            read_noise: 1.0,
             crf: [
                 Crf {
                     gamma: 2.0,
