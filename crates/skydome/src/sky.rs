@@ -559,7 +559,7 @@ pub fn detect_sun_luma(
     let mut comps: Vec<(f64, Vec<usize>)> = Vec::new();
     let mut stack = Vec::new();
     for start in 0..bw * bh {
-        if label[start] != 0 || !(blurred[start] >= t) {
+        if label[start] != 0 || blurred[start].is_nan() || blurred[start] < t {
             continue;
         }
         let id = comps.len() as u32 + 1;
