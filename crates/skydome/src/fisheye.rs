@@ -387,6 +387,13 @@ impl Projection {
     /// [`Projection::theta_limit`] lands at that radius (or `r` is negative / not finite).
     #[inline]
     pub fn theta(&self, r: f64) -> Option<f64> {
+        self.theta_within(r, self.theta_limit())
+    }
+
+    /// [`Projection::theta`] with the angle limit given (pass a cached
+    /// [`Projection::theta_limit`]: for the polynomial it is found by a scan).
+    #[inline]
+    pub fn theta_within(&self, r: f64, limit: f64) -> Option<f64> {
         if !(r.is_finite() && r >= 0.0) {
             return None;
         }
@@ -407,13 +414,12 @@ impl Projection {
                 }
                 s.asin()
             }
-            Projection::Polynomial { .. } => return self.polynomial_theta(r),
+            Projection::Polynomial { .. } => return self.polynomial_theta(r, limit),
         };
-        (t.is_finite() && t <= self.theta_limit() + 1e-12).then_some(t)
+        (t.is_finite() && t <= limit + 1e-12).then_some(t)
     }
 
-    fn polynomial_theta(&self, r: f64) -> Option<f64> {
-        let limit = self.theta_limit();
+    fn polynomial_theta(&self, r: f64, limit: f64) -> Option<f64> {
         if r > self.radius(limit) {
             return None;
         }

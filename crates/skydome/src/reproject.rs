@@ -439,6 +439,18 @@ impl Sampler<'_> {
     }
 }
 
+/// Where one output position takes its value from.
+#[derive(Clone, Copy, PartialEq)]
+enum Tap {
+    /// A continuous source position.
+    Src(f64, f64),
+    /// A constant (ground fill).
+    Const([f32; 3]),
+    /// Nothing (outside the map's disc or the lens's field): zero.
+    Outside,
+}
+
+#[allow(clippy::too_many_arguments)]
 fn render_row(
     sampler: &Sampler<'_>,
     mapper: &Mapper,
@@ -446,43 +458,58 @@ fn render_row(
     width: usize,
     max_ss: usize,
     row: &mut [f32],
-    cur: &mut Vec<Option<(f64, f64)>>,
-    below: &mut Vec<Option<(f64, f64)>>,
+    cur: &mut Vec<Tap>,
+    below: &mut Vec<Tap>,
 ) {
     let yc = y as f64 + 0.5;
-    let pos = |x: f64, yy: f64| {
-        mapper
-            .pixel_to_vector(x, yy)
-            .and_then(|v| sampler.source_pos(v).ok().flatten())
+    let tap = |x: f64, yy: f64| match mapper.pixel_to_vector(x, yy) {
+        None => Tap::Outside,
+        Some(v) => match sampler.source_pos(v) {
+            Ok(Some((sx, sy))) => Tap::Src(sx, sy),
+            Ok(None) => Tap::Outside,
+            Err(c) => Tap::Const(c),
+        },
     };
     cur.clear();
     below.clear();
     for x in 0..=width {
-        cur.push(pos(x as f64 + 0.5, yc));
+        cur.push(tap(x as f64 + 0.5, yc));
     }
     for x in 0..width {
-        below.push(pos(x as f64 + 0.5, yc + 1.0));
+        below.push(tap(x as f64 + 0.5, yc + 1.0));
     }
+    // A jump across the equirect seam or a ball's rim is not a footprint.
+    let seam = 0.25 * (sampler.src.width.max(sampler.src.height) as f64);
     for x in 0..width {
         let centre = cur[x];
-        let k = match (centre, cur[x + 1], below[x]) {
-            (Some(c), r, b) => {
-                let dr = r.map_or(0.0, |r| (r.0 - c.0).hypot(r.1 - c.1));
-                let db = b.map_or(0.0, |b| (b.0 - c.0).hypot(b.1 - c.1));
-                // A jump across the equirect seam or the ball's rim is not a footprint.
-                let lim = 0.25 * (sampler.src.width.max(sampler.src.height) as f64);
-                let dr = if dr > lim { 0.0 } else { dr };
-                let db = if db > lim { 0.0 } else { db };
-                dr.max(db)
+        let k = match centre {
+            Tap::Src(cx, cy) => {
+                let mut k = 0.0f64;
+                for nb in [cur[x + 1], below[x]] {
+                    k = k.max(match nb {
+                        Tap::Src(nx, ny) => {
+                            let d = (nx - cx).hypot(ny - cy);
+                            if d > seam {
+                                0.0
+                            } else {
+                                d
+                            }
+                        }
+                        // The pixel straddles the horizon or the lens's edge.
+                        _ => 2.0,
+                    });
+                }
+                k
             }
+            _ if cur[x + 1] == centre && below[x] == centre => 1.0,
             _ => 2.0,
         };
         let n = (k.ceil() as usize).clamp(1, max_ss);
         let px = if n == 1 {
-            let v = mapper.pixel_to_vector(x as f64 + 0.5, yc);
             match centre {
-                Some((sx, sy)) => bilinear(sampler.src, sx, sy),
-                None => sampler.sample(v),
+                Tap::Src(sx, sy) => bilinear(sampler.src, sx, sy),
+                Tap::Const(c) => c,
+                Tap::Outside => [0.0; 3],
             }
         } else {
             let mut acc = [0.0f64; 3];
@@ -581,6 +608,7 @@ pub fn horizontal_irradiance_fisheye(img: &HdrImage, geom: &SkyGeometry) -> [f64
     let (cx, cy) = geom.centre();
     let r90 = proj.radius(std::f64::consts::FRAC_PI_2);
     let d0 = proj.derivative(0.0);
+    let limit = proj.theta_limit();
     let weight = |dx: f64, dy: f64| -> f64 {
         let rho = dx.hypot(dy);
         if rho > r90 {
@@ -589,7 +617,7 @@ pub fn horizontal_irradiance_fisheye(img: &HdrImage, geom: &SkyGeometry) -> [f64
         if rho < 1e-9 {
             return 1.0 / (d0 * d0);
         }
-        match proj.theta(rho) {
+        match proj.theta_within(rho, limit) {
             Some(t) => t.cos() * t.sin() / (rho * proj.derivative(t)),
             None => 0.0,
         }

@@ -226,6 +226,7 @@ pub struct SkyGeometry {
     cy: f64,
     projection: Projection,
     theta_max: f64,
+    theta_limit: f64,
     north_azimuth_deg: f64,
     pose: DevicePose,
     orientation: ImageOrientation,
@@ -296,6 +297,7 @@ impl SkyGeometry {
             cy: lens.circle.cy,
             projection: lens.projection,
             theta_max: (0.5 * lens.fov_deg.to_radians()).min(lens.projection.theta_limit()),
+            theta_limit: lens.projection.theta_limit(),
             north_azimuth_deg,
             pose,
             orientation,
@@ -387,7 +389,7 @@ impl SkyGeometry {
         let dx = m[0][0] * sx + m[0][1] * sy;
         let dy = m[1][0] * sx + m[1][1] * sy;
         let rho = dx.hypot(dy);
-        let theta = self.projection.theta(rho)?;
+        let theta = self.projection.theta_within(rho, self.theta_limit)?;
         if theta > self.theta_max + 1e-12 {
             return None;
         }
@@ -557,7 +559,7 @@ pub fn detect_sun_luma(
     let mut comps: Vec<(f64, Vec<usize>)> = Vec::new();
     let mut stack = Vec::new();
     for start in 0..bw * bh {
-        if label[start] != 0 || !(blurred[start] >= t) {
+        if label[start] != 0 || blurred[start].is_nan() || blurred[start] < t {
             continue;
         }
         let id = comps.len() as u32 + 1;

@@ -482,3 +482,50 @@ fn sun_found_on_the_real_alpnach_frames_and_overlay_written() {
     let blue = preview.pixel(n.x as usize, n.y as usize);
     assert!(blue[2] > 200 && blue[0] < 80, "{blue:?}");
 }
+
+#[test]
+fn polynomial_lens_profile_maps_pixels_and_directions_both_ways() {
+    use skydome::fisheye::{fit_projection, AngleRadius};
+    let truth = Lens::Polynomial(150.0, -6.0, 0.4);
+    let samples: Vec<AngleRadius> = (1..=23)
+        .map(|i| {
+            let a = 5.0 * i as f64;
+            AngleRadius {
+                angle_deg: a,
+                radius_px: truth.r(a.to_radians()),
+            }
+        })
+        .collect();
+    let fit = fit_projection(&samples, None).unwrap();
+    let lensp = LensProfile::from_fit(400.0, 300.0, 235.0, &fit).unwrap();
+    assert!((lensp.circle.r - truth.r(117.5f64.to_radians())).abs() < 1e-6);
+    let g = SkyGeometry::new(
+        &lensp,
+        12.0,
+        DevicePose::ScreenDown,
+        ImageOrientation::Normal,
+    )
+    .unwrap();
+    let dome = Dome {
+        width: 800,
+        height: 600,
+        cx: 400.0,
+        cy: 300.0,
+        lens: truth,
+        visible_r: lensp.circle.r,
+        north_deg: 12.0,
+        housing: 0.0,
+        ss: 1,
+    };
+    for az in (0..360).step_by(40) {
+        for el in [-20.0, 0.0, 33.0, 71.0] {
+            let p = g
+                .direction_to_pixel(&Direction::new(az as f64, el))
+                .unwrap();
+            let (x, y) = dome.pixel(az as f64, el);
+            assert!((p.x - x).abs() < 1e-6 && (p.y - y).abs() < 1e-6);
+            let back = g.pixel_to_direction(p).unwrap();
+            assert!(back.angle_to(&Direction::new(az as f64, el)) < 1e-7);
+        }
+    }
+}
