@@ -111,6 +111,10 @@ pub struct Args {
     /// Also solve K times with seeds seed..seed+K−1 and report the spread of g per code.
     #[arg(long, value_name = "K")]
     pub repeat: Option<usize>,
+    /// The seed's §9.2 experiment: also calibrate with each of these sample counts (no automatic
+    /// raise), 5 seeds each, and print how the seed-to-seed spread of g falls with N.
+    #[arg(long, value_name = "N1,N2,...", value_delimiter = ',')]
+    pub sweep: Vec<usize>,
     /// Plot the curves with their sample points (.png or .svg).
     #[arg(long, value_name = "FILE")]
     pub plot: Option<PathBuf>,
@@ -128,7 +132,16 @@ struct Report<'a> {
     sampling: Option<&'a skydome::sampling::SampleReport>,
     monotonic_fixes: Option<[usize; 3]>,
     stability: Option<response::Stability>,
+    sweep: Vec<SweepRow>,
     written: Vec<String>,
+}
+
+#[derive(Serialize)]
+struct SweepRow {
+    samples: usize,
+    used: f64,
+    rms_spread: f64,
+    max_spread: f64,
 }
 
 /// Fills the camera fields of a profile from the bracket's EXIF.
@@ -150,6 +163,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         sampling: None,
         monotonic_fixes: None,
         stability: None,
+        sweep: Vec::new(),
         written: Vec::new(),
     };
     let spin = io::spinner(quiet, "calibrating");
@@ -174,6 +188,20 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
                 );
             }
             report.stability = Some(s);
+        }
+        if !a.sweep.is_empty() {
+            let rows =
+                response::sample_count_experiment(&br.frames, a.calib.circle, &opts, &a.sweep, 5)
+                    .context("sample-count experiment")?;
+            report.sweep = rows
+                .iter()
+                .map(|r| SweepRow {
+                    samples: r.samples,
+                    used: r.used,
+                    rms_spread: r.stability.rms_spread,
+                    max_spread: r.stability.max_spread,
+                })
+                .collect();
         }
         if let Some(p) = &a.plot {
             outputs.add(p, crate::pictures::curve_plot(p, &calibration)?);
@@ -221,6 +249,15 @@ fn print_report(r: &Report) {
             s.max_spread,
             if s.stable { "stable" } else { "UNSTABLE" }
         ));
+    }
+    if !r.sweep.is_empty() {
+        crate::out("samples  used   RMS spread of g (ln)  max spread");
+        for s in &r.sweep {
+            crate::out(&format!(
+                "{:>7} {:>6.0} {:>21.4} {:>11.4}",
+                s.samples, s.used, s.rms_spread, s.max_spread
+            ));
+        }
     }
     for w in &r.written {
         crate::out(&format!("wrote {w}"));
