@@ -118,24 +118,12 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     // Calibration samples come from inside the lens circle when there is one.
     let circle = a.calib.circle.or(lens.as_ref().map(|l| l.0.circle));
     let mut sampling = None;
-    let (resp, response_from) = match &profile {
-        Some(p) => (
-            p.response().with_context(|| {
-                format!(
-                    "{}",
-                    a.profile
-                        .as_ref()
-                        .map_or(String::new(), |p| p.display().to_string())
-                )
-            })?,
-            format!(
-                "profile {}",
-                a.profile
-                    .as_ref()
-                    .map_or(String::new(), |p| p.display().to_string())
-            ),
+    let (resp, response_from) = match (&profile, &a.profile) {
+        (Some(p), Some(path)) => (
+            p.response().with_context(|| path.display().to_string())?,
+            format!("profile {}", path.display()),
         ),
-        None => {
+        _ => {
             let spin = io::spinner(quiet, "calibrating");
             let cal = response::calibrate(&br.frames, circle, &a.calib.options())
                 .context("calibration failed")?;

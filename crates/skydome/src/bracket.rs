@@ -141,10 +141,8 @@ impl CaptureInfo {
             .and_then(parse_exif_datetime)
             .map(format_exif_datetime);
         let gmt = self.capture_time().map(|t| {
-            format_exif_datetime(time::PrimitiveDateTime::new(
-                t.to_offset(time::UtcOffset::UTC).date(),
-                t.to_offset(time::UtcOffset::UTC).time(),
-            ))
+            let u = t.to_offset(time::UtcOffset::UTC);
+            format_exif_datetime(time::PrimitiveDateTime::new(u.date(), u.time()))
         });
         (local, gmt)
     }
