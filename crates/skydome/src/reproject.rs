@@ -32,8 +32,9 @@
 //! `k > 1` source pixels the output pixel averages `n × n` bilinear taps on a regular grid inside
 //! it, `n = ⌈k⌉` (capped by [`ReprojectOptions::max_supersample`]): a box filter over the
 //! footprint, so shrinking does not alias and a small sun keeps its energy; where the map
-//! magnifies, one bilinear tap is used. Rows are processed in parallel with rayon (feature
-//! `parallel`).
+//! magnifies, one bilinear tap is used. Bands of 16 rows are processed in parallel with rayon
+//! (feature `parallel`); within a band each row's centre taps are reused as the previous row's
+//! lower neighbours, so every centre is mapped once.
 //!
 //! # Horizontal irradiance
 //! `E = ∫ L·cos θ dω` over the upper hemisphere (`θ` = zenith angle), per channel, in the
@@ -450,6 +451,51 @@ enum Tap {
     Outside,
 }
 
+/// Taps at the centres of output row `y` (plus one column beyond the right edge).
+fn tap_row(sampler: &Sampler<'_>, mapper: &Mapper, y: usize, width: usize, out: &mut Vec<Tap>) {
+    let yc = y as f64 + 0.5;
+    out.clear();
+    out.extend(
+        (0..=width).map(|x| match mapper.pixel_to_vector(x as f64 + 0.5, yc) {
+            None => Tap::Outside,
+            Some(v) => match sampler.source_pos(v) {
+                Ok(Some((sx, sy))) => Tap::Src(sx, sy),
+                Ok(None) => Tap::Outside,
+                Err(c) => Tap::Const(c),
+            },
+        }),
+    );
+}
+
+/// Renders a band of consecutive rows starting at `y0`; each row's taps serve as the previous
+/// row's lower neighbours, so every centre is mapped once.
+fn render_band(
+    sampler: &Sampler<'_>,
+    mapper: &Mapper,
+    y0: usize,
+    width: usize,
+    max_ss: usize,
+    band: &mut [f32],
+) {
+    let mut cur = Vec::with_capacity(width + 1);
+    let mut below = Vec::with_capacity(width + 1);
+    tap_row(sampler, mapper, y0, width, &mut cur);
+    for (i, row) in band.chunks_exact_mut(3 * width).enumerate() {
+        render_row(
+            sampler,
+            mapper,
+            y0 + i,
+            width,
+            max_ss,
+            row,
+            &cur,
+            &mut below,
+        );
+        std::mem::swap(&mut cur, &mut below);
+    }
+}
+
+/// Renders one row from its centre taps `cur`; fills `below` with the next row's taps.
 #[allow(clippy::too_many_arguments)]
 fn render_row(
     sampler: &Sampler<'_>,
@@ -458,26 +504,10 @@ fn render_row(
     width: usize,
     max_ss: usize,
     row: &mut [f32],
-    cur: &mut Vec<Tap>,
+    cur: &[Tap],
     below: &mut Vec<Tap>,
 ) {
-    let yc = y as f64 + 0.5;
-    let tap = |x: f64, yy: f64| match mapper.pixel_to_vector(x, yy) {
-        None => Tap::Outside,
-        Some(v) => match sampler.source_pos(v) {
-            Ok(Some((sx, sy))) => Tap::Src(sx, sy),
-            Ok(None) => Tap::Outside,
-            Err(c) => Tap::Const(c),
-        },
-    };
-    cur.clear();
-    below.clear();
-    for x in 0..=width {
-        cur.push(tap(x as f64 + 0.5, yc));
-    }
-    for x in 0..width {
-        below.push(tap(x as f64 + 0.5, yc + 1.0));
-    }
+    tap_row(sampler, mapper, y + 1, width, below);
     // A jump across the equirect seam or a ball's rim is not a footprint.
     let seam = 0.25 * (sampler.src.width.max(sampler.src.height) as f64);
     for x in 0..width {
@@ -577,25 +607,20 @@ pub fn reproject(
         ground: options.ground,
     };
     let max_ss = options.max_supersample;
+    // Bands of rows: enough of them to balance the threads, long enough that recomputing each
+    // band's first row of taps costs little.
+    const BAND_ROWS: usize = 16;
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
         out.data
-            .par_chunks_exact_mut(3 * w)
+            .par_chunks_mut(3 * w * BAND_ROWS)
             .enumerate()
-            .for_each_init(
-                || (Vec::with_capacity(w + 1), Vec::with_capacity(w)),
-                |(cur, below), (y, row)| {
-                    render_row(&sampler, &mapper, y, w, max_ss, row, cur, below)
-                },
-            );
+            .for_each(|(b, band)| render_band(&sampler, &mapper, b * BAND_ROWS, w, max_ss, band));
     }
     #[cfg(not(feature = "parallel"))]
-    {
-        let (mut cur, mut below) = (Vec::with_capacity(w + 1), Vec::with_capacity(w));
-        for (y, row) in out.data.chunks_exact_mut(3 * w).enumerate() {
-            render_row(&sampler, &mapper, y, w, max_ss, row, &mut cur, &mut below);
-        }
+    for (b, band) in out.data.chunks_mut(3 * w * BAND_ROWS).enumerate() {
+        render_band(&sampler, &mapper, b * BAND_ROWS, w, max_ss, band);
     }
     Ok(out)
 }
