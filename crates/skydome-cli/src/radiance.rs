@@ -60,13 +60,30 @@ fn unexpose(image: &mut HdrImage, exposure: Option<f64>) {
     }
 }
 
+/// Largest finite half-float value.
+const HALF_MAX: f32 = 65504.0;
+
 /// Encodes a radiance map for `path` by its extension: `.hdr` (RGBE) or `.exr` (half float
-/// unless `float`).
+/// unless `float`, or unless the values exceed half's range: then 32-bit float, with a warning,
+/// because half would turn them into infinity).
 pub fn encode(path: &Path, image: &HdrImage, meta: &HdrMeta, float: bool) -> Result<Vec<u8>> {
     let name = path.display();
     match crate::io::extension(path).as_str() {
         "hdr" | "pic" | "rgbe" => rgbe::encode_rgbe(image, meta).with_context(|| name.to_string()),
         "exr" => {
+            let max = image
+                .data
+                .iter()
+                .copied()
+                .filter(|v| v.is_finite())
+                .fold(0.0f32, f32::max);
+            let float = float || max > HALF_MAX;
+            if float && max > HALF_MAX {
+                crate::io::warn(
+                    false,
+                    &format!("{name}: values up to {max:.3e} exceed half-float range; writing 32-bit float channels"),
+                );
+            }
             let t = if float {
                 exr::ExrPixelType::Float
             } else {
