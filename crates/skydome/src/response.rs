@@ -457,7 +457,8 @@ fn cholesky(a: &mut [f64], n: usize) -> bool {
         let (upto, below) = rest.split_at_mut(n);
         let fj = first[j];
         let d = upto[j] - dot(&upto[fj..j], &upto[fj..j]);
-        if !(d > tiny) {
+        // Also catches NaN: a NaN pivot is not greater than anything.
+        if d.partial_cmp(&tiny) != Some(std::cmp::Ordering::Greater) {
             return false;
         }
         let d = d.sqrt();
