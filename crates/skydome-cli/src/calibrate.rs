@@ -24,7 +24,7 @@ pub struct CalibArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Smoothness weight λ of the second-derivative term.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = CalibrateOptions::default().lambda)]
     pub lambda: f64,
     /// `robust` rejects clipped, edge and non-monotonic samples and raises N; `seed` is the
     /// original method exactly (random pixels per cell, no rejection).

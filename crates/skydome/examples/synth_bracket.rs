@@ -38,8 +38,8 @@ fn write_pfm(path: &Path, img: &skydome::HdrImage) -> std::io::Result<()> {
 fn write_curves(path: &Path, g: &[Vec<f64>; 3]) -> std::io::Result<()> {
     let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
     writeln!(f, "z,g_r,g_g,g_b")?;
-    for z in 0..256 {
-        writeln!(f, "{z},{},{},{}", g[0][z], g[1][z], g[2][z])?;
+    for (z, ((r, gg), b)) in g[0].iter().zip(&g[1]).zip(&g[2]).enumerate() {
+        writeln!(f, "{z},{r},{gg},{b}")?;
     }
     f.flush()
 }

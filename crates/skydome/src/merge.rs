@@ -248,9 +248,9 @@ fn build_lut8(response: &Response, lt: &[f64], weighting: Weighting) -> Vec<[f32
     for (j, &l) in lt.iter().enumerate() {
         for c in 0..3 {
             let g = response.curve(c);
-            for z in 0..LEVELS {
+            for (z, &gz) in g.iter().enumerate() {
                 let w = weight(z as f32, j, p, weighting, W_MAX, hat(z as u8) as f32);
-                lut.push([w, w * (g[z] - l) as f32]);
+                lut.push([w, w * (gz - l) as f32]);
             }
         }
     }
@@ -273,6 +273,14 @@ fn build_lut16(response: &Response, lt: &[f64], weighting: Weighting) -> Vec<[f3
     lut
 }
 
+/// One band of work: offset of its first sample, its output, confidence and mask slices.
+type Band<'a> = (
+    usize,
+    &'a mut [f32],
+    Option<&'a mut [f32]>,
+    Option<&'a mut [u8]>,
+);
+
 #[allow(clippy::too_many_arguments)]
 fn run_bands<T: Copy + Into<usize> + Sync>(
     srcs: &[&[T]],
@@ -287,7 +295,7 @@ fn run_bands<T: Copy + Into<usize> + Sync>(
 ) {
     let band = ROWS_PER_BAND * 3 * w;
     let pband = ROWS_PER_BAND * w;
-    let mut jobs: Vec<(usize, &mut [f32], Option<&mut [f32]>, Option<&mut [u8]>)> = out
+    let mut jobs: Vec<Band<'_>> = out
         .chunks_mut(band)
         .enumerate()
         .map(|(k, o)| (k * band, o, None, None))
@@ -302,7 +310,7 @@ fn run_bands<T: Copy + Into<usize> + Sync>(
             job.3 = Some(m);
         }
     }
-    let work = |(off, o, c, m): (usize, &mut [f32], Option<&mut [f32]>, Option<&mut [u8]>)| {
+    let work = |(off, o, c, m): Band<'_>| {
         merge_band(srcs, lut, levels, hat_lut, w, off, o, c, m);
     };
     #[cfg(feature = "parallel")]

@@ -439,26 +439,39 @@ fn hat_table() -> [f64; LEVELS] {
     w
 }
 
-/// Lower-triangular Cholesky factor of a row-major `n × n` SPD matrix, in place.
+/// Lower-triangular Cholesky factor of a row-major `n × n` SPD matrix, in place (the upper
+/// triangle is left as it was and never read again).
+///
+/// Envelope (skyline) form: `L` has no entries left of a row's first non-zero in `A`, so each
+/// dot product starts at the later of the two rows' first non-zeros. A code couples only to
+/// the codes its pixels take in the neighbouring exposures, so the rows of the 256 × 256
+/// Schur complement start well right of column 0 and this skips a good part of the `n³/6`.
 fn cholesky(a: &mut [f64], n: usize) -> bool {
     let max_diag = (0..n).map(|i| a[i * n + i]).fold(0.0f64, f64::max);
     let tiny = max_diag * 1e-14;
+    let first: Vec<usize> = (0..n)
+        .map(|i| (0..=i).find(|&k| a[i * n + k] != 0.0).unwrap_or(i))
+        .collect();
     for j in 0..n {
-        let (top, rest) = a.split_at_mut(j * n);
-        let rowj = &mut rest[..n];
-        let d = rowj[j] - dot(&rowj[..j], &rowj[..j]);
-        if !(d > tiny) {
+        let (_, rest) = a.split_at_mut(j * n);
+        let (upto, below) = rest.split_at_mut(n);
+        let fj = first[j];
+        let d = upto[j] - dot(&upto[fj..j], &upto[fj..j]);
+        // Also catches NaN: a NaN pivot is not greater than anything.
+        if d.partial_cmp(&tiny) != Some(std::cmp::Ordering::Greater) {
             return false;
         }
         let d = d.sqrt();
-        rowj[j] = d;
-        let _ = top;
-        let (upto, below) = rest.split_at_mut(n);
-        let rowj = &upto[..j];
+        upto[j] = d;
         let inv = 1.0 / d;
+        let rowj = &upto[..j];
         for i in j + 1..n {
             let rowi = &mut below[(i - j - 1) * n..(i - j) * n];
-            rowi[j] = (rowi[j] - dot(&rowi[..j], rowj)) * inv;
+            let f = fj.max(first[i]);
+            if f > j {
+                continue; // row i's envelope starts right of column j: L[i][j] = 0
+            }
+            rowi[j] = (rowi[j] - dot(&rowi[f..j], &rowj[f..j])) * inv;
         }
     }
     true

@@ -510,10 +510,8 @@ fn reject_reason(
     }
     let tol = opts.monotonic_tolerance as f32;
     for pair in vals.windows(2) {
-        for c in 0..3 {
-            if pair[1][c] < pair[0][c] - tol {
-                return Some(Reject::NonMonotonic);
-            }
+        if pair[1].iter().zip(&pair[0]).any(|(&b, &a)| b < a - tol) {
+            return Some(Reject::NonMonotonic);
         }
     }
     // 3 × 3 neighbourhood, clamped at the frame border; per channel, because JPEG's chroma

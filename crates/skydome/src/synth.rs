@@ -180,9 +180,11 @@ fn check(opts: &SynthOptions) -> Result<(), SynthError> {
     if matches!(opts.jpeg_quality, Some(q) if q == 0 || q > 100) {
         return bad("jpeg_quality must be 1..=100".into());
     }
-    if !(opts.full_well.is_finite() && opts.full_well >= 1.0)
-        || !(opts.read_noise.is_finite() && opts.read_noise >= 0.0)
-    {
+    let sensor_ok = opts.full_well.is_finite()
+        && opts.full_well >= 1.0
+        && opts.read_noise.is_finite()
+        && opts.read_noise >= 0.0;
+    if !sensor_ok {
         return bad(
             "full_well must be >= 1 electron and read_noise finite and non-negative".into(),
         );
@@ -215,7 +217,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthBracket, SynthError> {
     let k = 0.25 / opts.base_time_s;
     let mut evs = opts.evs.clone();
     evs.sort_by(f64::total_cmp);
-    let mut rng = SplitMix64::new(opts.seed ^ 0x5EED_0F_C0FFEE);
+    let mut rng = SplitMix64::new(opts.seed ^ 0x5EED_0FC0_FFEE);
     let mut frames = Vec::with_capacity(evs.len());
     for ev in evs {
         let t = opts.base_time_s * ev.exp2();

@@ -248,8 +248,8 @@ fn frame_consistency(frames: &[Frame], r: &Response, merged: &skydome::HdrImage)
             for p in 0..f.width * f.height {
                 let px = &v[3 * p..3 * p + 3];
                 if px.iter().all(|&z| (20..=235).contains(&z)) {
-                    for c in 0..3 {
-                        let ej = r.curve(c)[px[c] as usize] - lt;
+                    for (c, &z) in px.iter().enumerate() {
+                        let ej = r.curve(c)[z as usize] - lt;
                         let em = (merged.data[3 * p + c] as f64).ln();
                         d.push(((ej - em) / std::f64::consts::LN_2).abs());
                     }
@@ -264,7 +264,8 @@ fn frame_consistency(frames: &[Frame], r: &Response, merged: &skydome::HdrImage)
 #[test]
 fn real_brackets_merge_consistently_between_frames() {
     let Some(d) = data_dir() else { return };
-    let sets: [(&str, Vec<(&str, f64)>, f64); 2] = [
+    type Set<'a> = (&'a str, Vec<(&'a str, f64)>, f64);
+    let sets: [Set; 2] = [
         (
             "frobisher_001",
             vec![
