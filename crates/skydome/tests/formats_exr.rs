@@ -177,9 +177,11 @@ fn standard_attributes_carry_capture_date_offset_and_comments() {
 #[test]
 fn gmt_is_computed_from_capdate_and_utc_offset_of_foreign_files() {
     use exr::prelude::*;
-    let mut attrs = LayerAttributes::default();
-    attrs.capture_date = Some(Text::from("2023:12:31 23:30:00"));
-    attrs.utc_offset = Some(3600.0);
+    let attrs = LayerAttributes {
+        capture_date: Some(Text::from("2023:12:31 23:30:00")),
+        utc_offset: Some(3600.0),
+        ..Default::default()
+    };
     let layer = Layer::new(
         (4, 2),
         attrs,
@@ -290,7 +292,10 @@ fn exr_files(dir: &Path) -> Vec<PathBuf> {
 }
 
 /// R, G, B (or Y) of the first valid layer through the `exr` crate's generic channel reader.
-fn direct(path: &Path) -> Option<(usize, usize, i32, i32, Vec<Vec<f32>>)> {
+/// Width, height, data-window origin and channel samples.
+type Direct = (usize, usize, i32, i32, Vec<Vec<f32>>);
+
+fn direct(path: &Path) -> Option<Direct> {
     let img = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -304,7 +309,7 @@ fn direct(path: &Path) -> Option<(usize, usize, i32, i32, Vec<Vec<f32>>)> {
         l.channel_data
             .list
             .iter()
-            .find(|c| c.name == exr::prelude::Text::from(n))
+            .find(|c| c.name == *n)
             .map(|c| c.sample_data.values_as_f32().collect::<Vec<f32>>())
     };
     let chans = match (find("R"), find("G"), find("B")) {

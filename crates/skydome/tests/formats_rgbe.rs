@@ -41,7 +41,12 @@ fn test_image(width: usize, height: usize, seed: u64) -> HdrImage {
     let mut img = HdrImage::new(width, height);
     for y in 0..height {
         for x in 0..width {
-            let v = match y % 5 {
+            let v = match y % 6 {
+                5 => {
+                    // Largest channel in [2^-128, 2^-120): the encoder's scalar fallback.
+                    let t = 2f32.powi(-128) * (1.0 + 250.0 * rng.unit() as f32);
+                    [t, t * 0.5, 0.0]
+                }
                 0 => [0.0; 3],
                 1 => {
                     let run = (x / 13) as f32;

@@ -357,7 +357,7 @@ fn channel_names(h: &Header) -> Vec<String> {
 }
 
 fn has(h: &Header, name: &str) -> bool {
-    h.channels.list.iter().any(|c| c.name == Text::from(name))
+    h.channels.list.iter().any(|c| c.name == *name)
 }
 
 fn text_attributes(h: &Header) -> Vec<(String, String)> {
@@ -539,7 +539,7 @@ pub fn read_exr(bytes: &[u8], limits: &Limits) -> Result<ExrFile, ExrError> {
         },
     };
     let display_window = Window::from(display_bounds);
-    let image = place_in_display_window(&pixels, data_window, display_window);
+    let image = place_in_display_window(pixels, data_window, display_window);
     Ok(ExrFile {
         image,
         meta,
@@ -550,12 +550,12 @@ pub fn read_exr(bytes: &[u8], limits: &Limits) -> Result<ExrFile, ExrError> {
     })
 }
 
-fn place_in_display_window(px: &DataPixels, data: Window, display: Window) -> HdrImage {
+fn place_in_display_window(px: DataPixels, data: Window, display: Window) -> HdrImage {
     if data == display {
         return HdrImage {
             width: display.width,
             height: display.height,
-            data: px.data.clone(),
+            data: px.data,
         };
     }
     let mut out = HdrImage::new(display.width, display.height);

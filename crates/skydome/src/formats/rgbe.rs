@@ -46,7 +46,8 @@
 //! 2. let `m = max(r, g, b)`; if `m <` [`RGBE_MIN`] (= 2⁻¹²⁸ ≈ 2.9·10⁻³⁹) the pixel is
 //!    `(0, 0, 0, 0)` — below that the shared exponent byte cannot keep the error bound;
 //! 3. `m = f · 2ᵉ` with `f ∈ [0.5, 1)` (`frexp`); the exponent byte is `e + 128`;
-//! 4. each mantissa is `min(255, round(c · 2⁸⁻ᵉ))` — **round to nearest**, not truncation.
+//! 4. each mantissa is `min(255, round(c · 2⁸⁻ᵉ))` — **round to nearest** (ties to even),
+//!    not truncation.
 //!
 //! Reading: `c = mantissa · 2^(E − 136)` for exponent byte `E ≠ 0`, and 0 for `E = 0`.
 //!
@@ -253,27 +254,54 @@ const EXP_TABLE: [f32; 256] = {
 /// (relative error ≤ 1/256 of the largest channel; NaN/negative → 0; +∞ → [`RGBE_MAX`]).
 #[inline]
 pub fn float_to_rgbe(rgb: [f32; 3]) -> [u8; 4] {
+    // Sanitising, the maximum and `frexp` work on the IEEE bit patterns (monotonic for
+    // non-negative floats; `frexp`'s exponent is the exponent field), so there is no libm call
+    // and every step is exact.
     #[inline(always)]
-    fn sanitise(v: f32) -> f32 {
-        // `!(v > 0)` also catches NaN.
-        if v > 0.0 {
-            v.min(RGBE_MAX)
+    fn sanitise(v: f32) -> u32 {
+        let b = v.to_bits();
+        // Keeps (0, +∞] (bit patterns 1..=0x7f80_0000); zero, negatives (sign bit, including
+        // negative NaNs) and +NaN become 0. Written as a select so it compiles branch-free.
+        let keep = b.wrapping_sub(1) < 0x7f80_0000;
+        if keep {
+            b.min(RGBE_MAX_BITS)
         } else {
-            0.0
+            0
         }
     }
     let [r, g, b] = rgb.map(sanitise);
     let m = r.max(g).max(b);
-    if m < RGBE_MIN {
+    if m < RGBE_MIN_BITS {
         return [0; 4];
     }
-    // frexp through the f64 bit pattern: f32 subnormals are normal f64s, and 2^(8-e) never
-    // overflows an f64, so one code path covers the whole range.
+    let e_field = m >> 23;
+    if e_field < 7 {
+        // The largest channel is below 2⁻¹²⁰, where 2^(8−e) overflows an f32: rare, use f64.
+        return float_to_rgbe_f64([r, g, b].map(f32::from_bits));
+    }
+    // 2^(8−e) with e = e_field − 126; multiplying by a power of two is exact.
+    let scale = f32::from_bits((261 - e_field) << 23);
+    // Adding 2²³ rounds x ∈ [0, 256) to the nearest integer (ties to even) in a single
+    // IEEE rounding and leaves that integer in the low significand bits.
+    const MAGIC: f32 = 8_388_608.0;
+    let q =
+        |c: u32| ((f32::from_bits(c) * scale + MAGIC).to_bits() - MAGIC.to_bits()).min(255) as u8;
+    // frexp exponent e = e_field − 126, stored as e + 128.
+    [q(r), q(g), q(b), (e_field + 2) as u8]
+}
+
+/// The same conversion through `f64` (`frexp` from the f64 exponent field), which covers f32
+/// subnormals; inputs must already be sanitised and their maximum ≥ [`RGBE_MIN`].
+fn float_to_rgbe_f64([r, g, b]: [f32; 3]) -> [u8; 4] {
+    let m = r.max(g).max(b);
     let e = ((f64::from(m).to_bits() >> 52) & 0x7ff) as i32 - 1022;
     let scale = f64::from_bits(((1023 + 8 - e) as u64) << 52);
-    let q = |v: f32| ((f64::from(v) * scale + 0.5) as u32).min(255) as u8;
+    let q = |v: f32| ((f64::from(v) * scale).round_ties_even() as u32).min(255) as u8;
     [q(r), q(g), q(b), (e + 128) as u8]
 }
+
+const RGBE_MAX_BITS: u32 = RGBE_MAX.to_bits();
+const RGBE_MIN_BITS: u32 = RGBE_MIN.to_bits();
 
 /// Converts an RGBE pixel to linear RGB: `mantissa · 2^(e − 136)`, black for `e = 0`.
 #[inline]
@@ -401,9 +429,11 @@ pub(crate) fn validate_meta(meta: &HdrMeta, width: usize, height: usize) -> Resu
     }
     let check_point = |what: &str, p: &PixelPoint| {
         let (w, h) = (width as f64, height as f64);
-        if !(p.x.is_finite() && p.y.is_finite() && (-w..=2.0 * w).contains(&p.x))
-            || !(-h..=2.0 * h).contains(&p.y)
-        {
+        let inside = p.x.is_finite()
+            && p.y.is_finite()
+            && (-w..=2.0 * w).contains(&p.x)
+            && (-h..=2.0 * h).contains(&p.y);
+        if !inside {
             return Err(format!(
                 "the {what} mark ({}, {}) is not a finite point within one image size of the {width}×{height} image",
                 p.x, p.y
@@ -540,16 +570,62 @@ fn encode_row(row: &[f32], w: usize, planes: &mut [u8], out: &mut Vec<u8>) {
     let (r, rest) = planes.split_at_mut(w);
     let (g, rest) = rest.split_at_mut(w);
     let (b, e) = rest.split_at_mut(w);
-    for (i, px) in row.chunks_exact(3).enumerate() {
-        let q = float_to_rgbe([px[0], px[1], px[2]]);
-        r[i] = q[0];
-        g[i] = q[1];
-        b[i] = q[2];
-        e[i] = q[3];
-    }
+    convert_row_planar(row, r, g, b, e);
     out.extend_from_slice(&[2, 2, (w >> 8) as u8, (w & 255) as u8]);
     for plane in [&*r, &*g, &*b, &*e] {
         rle_component(plane, out);
+    }
+}
+
+/// [`float_to_rgbe`] for a whole row into four planes, written without branches so the
+/// compiler vectorises it; the rare pixels whose largest channel is below 2⁻¹²⁰ (where the
+/// `f32` scale factor would overflow) are redone by the scalar function afterwards.
+fn convert_row_planar(row: &[f32], r: &mut [u8], g: &mut [u8], b: &mut [u8], e: &mut [u8]) {
+    const MAGIC: f32 = 8_388_608.0;
+    let mut tiny = 0u32;
+    let planes = r
+        .iter_mut()
+        .zip(g.iter_mut())
+        .zip(b.iter_mut().zip(e.iter_mut()));
+    for (px, ((r, g), (b, e))) in row.chunks_exact(3).zip(planes) {
+        let sanitise = |v: f32| {
+            let bits = v.to_bits();
+            let keep = bits.wrapping_sub(1) < 0x7f80_0000;
+            if keep {
+                bits.min(RGBE_MAX_BITS)
+            } else {
+                0
+            }
+        };
+        let (cr, cg, cb) = (sanitise(px[0]), sanitise(px[1]), sanitise(px[2]));
+        let m = cr.max(cg).max(cb);
+        let e_field = m >> 23;
+        let black = m < RGBE_MIN_BITS;
+        tiny |= u32::from(!black & (e_field < 7));
+        // Clamped so the bit pattern stays a valid power of two; such lanes are redone below.
+        let scale = f32::from_bits((261 - e_field.max(7)) << 23);
+        let q = |c: u32| {
+            let v = ((f32::from_bits(c) * scale + MAGIC).to_bits() - MAGIC.to_bits()).min(255);
+            if black {
+                0
+            } else {
+                v as u8
+            }
+        };
+        *r = q(cr);
+        *g = q(cg);
+        *b = q(cb);
+        *e = if black { 0 } else { (e_field + 2) as u8 };
+    }
+    if tiny != 0 {
+        let planes = r
+            .iter_mut()
+            .zip(g.iter_mut())
+            .zip(b.iter_mut().zip(e.iter_mut()));
+        for (px, ((r, g), (b, e))) in row.chunks_exact(3).zip(planes) {
+            let p = float_to_rgbe([px[0], px[1], px[2]]);
+            (*r, *g, *b, *e) = (p[0], p[1], p[2], p[3]);
+        }
     }
 }
 
@@ -561,19 +637,26 @@ fn rle_component(data: &[u8], out: &mut Vec<u8>) {
     let n = data.len();
     let mut lit_start = 0;
     let mut i = 0;
-    while i < n {
+    while i + MIN_RUN <= n {
+        // A run of MIN_RUN starting at i, i+1 or i+2 needs data[i+2] == data[i+3]: on noisy
+        // data this skips three bytes per comparison instead of one.
+        if data[i + 2] != data[i + 3] {
+            i += 3;
+            continue;
+        }
         let v = data[i];
-        let mut j = i + 1;
+        if data[i + 1] != v || data[i + 2] != v {
+            i += 1;
+            continue;
+        }
+        let mut j = i + 3;
         while j < n && data[j] == v && j - i < 127 {
             j += 1;
         }
-        let run = j - i;
-        if run >= MIN_RUN {
-            flush_literals(&data[lit_start..i], out);
-            out.push(128 + run as u8);
-            out.push(v);
-            lit_start = j;
-        }
+        flush_literals(&data[lit_start..i], out);
+        out.push(128 + (j - i) as u8);
+        out.push(v);
+        lit_start = j;
         i = j;
     }
     flush_literals(&data[lit_start..n], out);
@@ -836,7 +919,8 @@ pub fn read_rgbe<R: BufRead>(mut r: R, limits: &Limits) -> Result<RgbeFile, Rgbe
     };
     // The worst case of any encoding (new-style RLE of incompressible data plus its markers);
     // reading more would only let a hostile stream make us buffer garbage.
-    let max_bytes = (n_scan as u64) * (4 + 4 * (scan_len as u64 + scan_len as u64 / 128 + 1));
+    let per_scan = 4 + 4 * (scan_len as u64 + scan_len as u64 / 128 + 1);
+    let max_bytes = (n_scan as u64).saturating_mul(per_scan);
     let mut data = Vec::new();
     r.take(max_bytes).read_to_end(&mut data)?;
     let rgbe = decode_scanlines(&data, n_scan, scan_len)?;
@@ -851,7 +935,7 @@ pub fn decode_rgbe(bytes: &[u8], limits: &Limits) -> Result<RgbeFile, RgbeError>
 
 fn decode_scanlines(src: &[u8], n_scan: usize, len: usize) -> Result<Vec<u8>, RgbeError> {
     // Grow with the data actually decoded rather than trusting the header's size up front.
-    let total = n_scan * len * 4;
+    let total = n_scan.saturating_mul(len).saturating_mul(4);
     let mut out = Vec::with_capacity(total.min(src.len().saturating_mul(4)).max(4 * len));
     let mut pos = 0;
     for s in 0..n_scan {
@@ -882,21 +966,16 @@ fn decode_scanline(src: &[u8], pos: &mut usize, line: &mut [u8]) -> Result<(), S
             ));
         }
         *pos += 4;
-        for c in 0..4 {
-            decode_component(src, pos, line, c, len)?;
+        for plane in line.chunks_exact_mut(len) {
+            decode_component(src, pos, plane)?;
         }
         return Ok(());
     }
     decode_old(src, pos, line, len)
 }
 
-fn decode_component(
-    src: &[u8],
-    pos: &mut usize,
-    line: &mut [u8],
-    c: usize,
-    len: usize,
-) -> Result<(), ScanError> {
+fn decode_component(src: &[u8], pos: &mut usize, plane: &mut [u8]) -> Result<(), ScanError> {
+    let len = plane.len();
     let mut x = 0;
     while x < len {
         let code = *src.get(*pos).ok_or(ScanError::Truncated)?;
@@ -910,9 +989,7 @@ fn decode_component(
                     "a run goes past the end of the scanline",
                 ));
             }
-            for px in line[4 * x..4 * (x + n)].chunks_exact_mut(4) {
-                px[c] = v;
-            }
+            plane[x..x + n].fill(v);
             x += n;
         } else {
             let n = usize::from(code);
@@ -923,16 +1000,14 @@ fn decode_component(
             }
             let lit = src.get(*pos..*pos + n).ok_or(ScanError::Truncated)?;
             *pos += n;
-            for (px, &v) in line[4 * x..4 * (x + n)].chunks_exact_mut(4).zip(lit) {
-                px[c] = v;
-            }
+            plane[x..x + n].copy_from_slice(lit);
             x += n;
         }
     }
     Ok(())
 }
 
-/// Flat or old-style RLE scanline.
+/// Flat or old-style RLE scanline, written into the scanline's four component planes.
 fn decode_old(src: &[u8], pos: &mut usize, line: &mut [u8], len: usize) -> Result<(), ScanError> {
     let mut x = 0;
     let mut shift = 0u32;
@@ -954,15 +1029,16 @@ fn decode_old(src: &[u8], pos: &mut usize, line: &mut [u8], len: usize) -> Resul
                     "an old-style run goes past the end of the scanline",
                 ));
             }
-            let (done, rest) = line.split_at_mut(4 * x);
-            let prev = &done[4 * x - 4..];
-            for px in rest[..4 * n].chunks_exact_mut(4) {
-                px.copy_from_slice(prev);
+            for plane in line.chunks_exact_mut(len) {
+                let prev = plane[x - 1];
+                plane[x..x + n].fill(prev);
             }
             x += n;
             shift += 8;
         } else {
-            line[4 * x..4 * x + 4].copy_from_slice(p);
+            for (c, plane) in line.chunks_exact_mut(len).enumerate() {
+                plane[x] = p[c];
+            }
             x += 1;
             shift = 0;
         }
@@ -970,23 +1046,30 @@ fn decode_old(src: &[u8], pos: &mut usize, line: &mut [u8], len: usize) -> Resul
     Ok(())
 }
 
-fn to_float(rgbe: &[u8], h: &RgbeHeader) -> HdrImage {
+/// Converts planar scanlines (`R…, G…, B…, E…` per scanline) to the interleaved float image,
+/// applying the file's orientation.
+fn to_float(planes: &[u8], h: &RgbeHeader) -> HdrImage {
     let (w, ht) = (h.width, h.height);
     let mut data = vec![0.0f32; 3 * w * ht];
     if h.orientation == Orientation::STANDARD {
         let convert = |(dst, src): (&mut [f32], &[u8])| {
-            for (d, s) in dst.chunks_exact_mut(3).zip(src.chunks_exact(4)) {
-                d.copy_from_slice(&rgbe_to_float([s[0], s[1], s[2], s[3]]));
+            for (row, line) in dst.chunks_exact_mut(3 * w).zip(src.chunks_exact(4 * w)) {
+                let (r, rest) = line.split_at(w);
+                let (g, rest) = rest.split_at(w);
+                let (b, e) = rest.split_at(w);
+                for (i, px) in row.chunks_exact_mut(3).enumerate() {
+                    px.copy_from_slice(&rgbe_to_float([r[i], g[i], b[i], e[i]]));
+                }
             }
         };
         let rows = 64;
         #[cfg(feature = "parallel")]
         data.par_chunks_mut(3 * w * rows)
-            .zip(rgbe.par_chunks(4 * w * rows))
+            .zip(planes.par_chunks(4 * w * rows))
             .for_each(convert);
         #[cfg(not(feature = "parallel"))]
         data.chunks_mut(3 * w * rows)
-            .zip(rgbe.chunks(4 * w * rows))
+            .zip(planes.chunks(4 * w * rows))
             .for_each(convert);
     } else {
         let o = h.orientation;
@@ -995,7 +1078,7 @@ fn to_float(rgbe: &[u8], h: &RgbeHeader) -> HdrImage {
         } else {
             (w, ht)
         };
-        for s in 0..n_scan {
+        for (s, line) in planes.chunks_exact(4 * len).enumerate() {
             let c1 = if o.slow_decreasing { n_scan - 1 - s } else { s };
             for i in 0..len {
                 let c2 = if o.fast_decreasing { len - 1 - i } else { i };
@@ -1006,8 +1089,8 @@ fn to_float(rgbe: &[u8], h: &RgbeHeader) -> HdrImage {
                     (c1, c2)
                 };
                 let (x, y) = (xc, ht - 1 - yc);
-                let k = 4 * (s * len + i);
-                let v = rgbe_to_float([rgbe[k], rgbe[k + 1], rgbe[k + 2], rgbe[k + 3]]);
+                let v =
+                    rgbe_to_float([line[i], line[len + i], line[2 * len + i], line[3 * len + i]]);
                 data[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&v);
             }
         }
@@ -1027,19 +1110,73 @@ mod tests {
     fn worked_example_in_module_doc_holds() {
         assert_eq!(float_to_rgbe([0.3, 0.15, 0.0]), [154, 77, 0, 127]);
         let d = rgbe_to_float([154, 77, 0, 127]);
-        assert!((d[0] - 0.30078125).abs() < 1e-7 && (d[1] - 0.150390625).abs() < 1e-7);
+        assert_eq!(d, [154.0 / 512.0, 77.0 / 512.0, 0.0]);
         assert_eq!(float_to_rgbe([1.0, 0.5, 0.25]), [128, 64, 32, 129]);
         assert_eq!(rgbe_to_float([128, 64, 32, 129]), [1.0, 0.5, 0.25]);
     }
 
     #[test]
-    fn exponent_table_is_exact_powers_of_two() {
-        for e in 1..256 {
+    fn bit_pattern_conversion_equals_f64_reference() {
+        let mut s = 0x1234_5678_9abc_def1u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        for i in 0..1_000_000 {
+            let bits = next();
+            // Mix raw bit patterns with channels close to each other (the common case).
+            let px = if i % 2 == 0 {
+                [bits as u32, (bits >> 32) as u32, (bits >> 16) as u32].map(f32::from_bits)
+            } else {
+                let m = f32::from_bits((bits as u32) & 0x7fff_ffff);
+                [m, m * 0.37, m * ((bits >> 40) as f32 / 16_777_216.0)]
+            };
+            let clean = px.map(|v| if v > 0.0 { v.min(RGBE_MAX) } else { 0.0 });
+            let expected = if clean[0].max(clean[1]).max(clean[2]) < RGBE_MIN {
+                [0; 4]
+            } else {
+                float_to_rgbe_f64(clean)
+            };
+            assert_eq!(float_to_rgbe(px), expected, "{px:?}");
+        }
+    }
+
+    #[test]
+    fn vectorised_row_conversion_equals_scalar_for_any_bits() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let w = 4096;
+        let row: Vec<f32> = (0..3 * w)
+            .map(|i| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                match i % 4 {
+                    0 => f32::from_bits(s as u32),
+                    1 => f32::from_bits((s as u32) & 0x03ff_ffff), // tiny and subnormal
+                    _ => (s >> 40) as f32 * 1e-3,
+                }
+            })
+            .collect();
+        let mut planes = vec![0u8; 4 * w];
+        let (r, rest) = planes.split_at_mut(w);
+        let (g, rest) = rest.split_at_mut(w);
+        let (b, e) = rest.split_at_mut(w);
+        convert_row_planar(&row, r, g, b, e);
+        for (i, px) in row.chunks_exact(3).enumerate() {
             assert_eq!(
-                f64::from(EXP_TABLE[e]),
-                2f64.powi(e as i32 - 136),
-                "e = {e}"
+                [r[i], g[i], b[i], e[i]],
+                float_to_rgbe([px[0], px[1], px[2]]),
+                "{px:?}"
             );
+        }
+    }
+
+    #[test]
+    fn exponent_table_is_exact_powers_of_two() {
+        for (e, &v) in EXP_TABLE.iter().enumerate().skip(1) {
+            assert_eq!(f64::from(v), 2f64.powi(e as i32 - 136), "e = {e}");
         }
         assert_eq!(EXP_TABLE[0], 0.0);
     }
@@ -1075,11 +1212,10 @@ mod tests {
             .collect();
         let mut enc = Vec::new();
         rle_component(&plane, &mut enc);
-        let mut line = vec![0u8; 4 * plane.len()];
+        let mut back = vec![0u8; plane.len()];
         let mut pos = 0;
-        assert!(decode_component(&enc, &mut pos, &mut line, 2, plane.len()).is_ok());
+        assert!(decode_component(&enc, &mut pos, &mut back).is_ok());
         assert_eq!(pos, enc.len());
-        let back: Vec<u8> = line.chunks_exact(4).map(|p| p[2]).collect();
         assert_eq!(back, plane);
         assert!(enc.len() < plane.len(), "runs must compress");
     }
