@@ -37,6 +37,8 @@ struct Cli {
     command: Command,
 }
 
+// Parsed once per run: the size of the largest variant (merge's many options) does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Recover the camera response curve from a bracket and save a camera profile (JSON).

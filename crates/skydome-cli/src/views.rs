@@ -1,6 +1,6 @@
 //! Pictures of a radiance map: `falsecolor`, `histogram`, `render` (lit spheres).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use skydome::image::Circle;
@@ -68,16 +68,10 @@ pub struct RenderArgs {
     pub force: bool,
 }
 
-fn write_one(
-    output: &PathBuf,
-    input: &PathBuf,
-    bytes: Vec<u8>,
-    force: bool,
-    quiet: bool,
-) -> Result<()> {
+fn write_one(output: &Path, input: &Path, bytes: Vec<u8>, force: bool, quiet: bool) -> Result<()> {
     let mut out = Outputs::default();
     out.add(output, bytes);
-    for p in out.commit(std::slice::from_ref(input), force)? {
+    for p in out.commit(&[input.to_path_buf()], force)? {
         if !quiet {
             crate::out(&format!("wrote {}", p.display()));
         }
