@@ -2,10 +2,9 @@
 //! the binary (made by `skydome synth --size 400 --quality 90`, see `demo/` in the repository),
 //! printing each equivalent command as it runs it.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use skydome::fisheye::LensProfile;
 
 use crate::io::Outputs;
 
@@ -72,7 +71,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         ]
         .concat(),
     )?;
-    let lens = read_lens(&dir.join("lens.json"))?;
+    let lens = crate::geometry::read_lens(&dir.join("lens.json"))?;
     let c = lens.circle;
     let circle = format!("{:.3},{:.3},{:.3}", c.cx, c.cy, c.r);
 
@@ -185,10 +184,4 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         ));
     }
     Ok(())
-}
-
-fn read_lens(p: &Path) -> Result<LensProfile> {
-    let text =
-        std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
-    LensProfile::from_json(&text).with_context(|| p.display().to_string())
 }

@@ -91,7 +91,8 @@ pub enum SunArg {
     Pixel(f64, f64),
 }
 
-fn parse_kind(s: &str) -> Result<LensKind, String> {
+/// Parses a lens projection name.
+pub fn parse_kind(s: &str) -> Result<LensKind, String> {
     s.parse::<LensKind>().map_err(|e| e.to_string())
 }
 
@@ -114,6 +115,7 @@ fn parse_sun(s: &str) -> Result<SunArg, String> {
     }
 }
 
+/// Parses `black`, `mirror` or `R,G,B` for the lower hemisphere.
 pub fn parse_ground(s: &str) -> Result<Ground, String> {
     match s {
         "black" => Ok(Ground::Black),
@@ -252,6 +254,13 @@ pub fn lens_profile(
     };
     let lens = LensProfile::from_fov(circle, a.fov, a.lens_model).context("lens model")?;
     Ok((lens, fit))
+}
+
+/// Reads and validates a lens profile (JSON).
+pub fn read_lens(p: &std::path::Path) -> Result<LensProfile> {
+    let text =
+        std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
+    LensProfile::from_json(&text).with_context(|| p.display().to_string())
 }
 
 /// Runs the fish-eye stage on a merged radiance map.

@@ -38,7 +38,7 @@ pub struct DetectArgs {
     #[arg(long, value_name = "FILE")]
     pub overlay: Option<PathBuf>,
     /// Lens projection used to place the 180° horizon on the overlay.
-    #[arg(long, value_parser = parse_kind, default_value = "stereographic")]
+    #[arg(long, value_parser = crate::geometry::parse_kind, default_value = "stereographic")]
     pub model: LensKind,
     /// Field of view of the lens across the visible circle, degrees.
     #[arg(long, default_value_t = 235.0)]
@@ -82,10 +82,6 @@ pub struct FitArgs {
     /// Replace an existing output.
     #[arg(long)]
     pub force: bool,
-}
-
-fn parse_kind(s: &str) -> Result<LensKind, String> {
-    s.parse::<LensKind>().map_err(|e| e.to_string())
 }
 
 /// The top-level entry point for `skydome lens`.
@@ -245,7 +241,7 @@ fn fit(a: FitArgs, quiet: bool) -> Result<()> {
     io::check_destination(&a.output, &[], a.force)?;
     let choice = match a.model.as_str() {
         "auto" => None,
-        m => Some(parse_kind(m).map_err(anyhow::Error::msg)?),
+        m => Some(crate::geometry::parse_kind(m).map_err(anyhow::Error::msg)?),
     };
     let profile = match (&a.csv, a.circle) {
         (Some(csv), None) => {

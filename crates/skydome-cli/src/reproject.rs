@@ -26,7 +26,7 @@ pub struct Args {
     #[arg(long, value_name = "lens.json")]
     pub lens: Option<PathBuf>,
     /// The input is a 180° dome from `merge --crop`: its circle is the horizon; give its model.
-    #[arg(long, value_parser = parse_kind, value_name = "MODEL")]
+    #[arg(long, value_parser = crate::geometry::parse_kind, value_name = "MODEL")]
     pub dome: Option<LensKind>,
     /// Compass azimuth of the phone's top edge, degrees (as given to merge).
     #[arg(long, allow_hyphen_values = true, default_value_t = 0.0)]
@@ -41,7 +41,7 @@ pub struct Args {
     #[arg(long, allow_hyphen_values = true, default_value_t = 90.0)]
     pub centre_azimuth: f64,
     /// Lower hemisphere: black, mirror, or a constant R,G,B radiance.
-    #[arg(long, default_value = "black", value_parser = parse_ground)]
+    #[arg(long, default_value = "black", value_parser = crate::geometry::parse_ground)]
     pub ground: Ground,
     /// Replace an existing output.
     #[arg(long)]
@@ -61,23 +61,12 @@ pub enum Target {
     Fisheye,
 }
 
-fn parse_kind(s: &str) -> Result<LensKind, String> {
-    s.parse::<LensKind>().map_err(|e| e.to_string())
-}
-
-fn parse_ground(s: &str) -> Result<Ground, String> {
-    crate::geometry::parse_ground(s)
-}
-
 /// The top-level entry point for `skydome reproject`.
 pub fn run(a: Args, quiet: bool) -> Result<()> {
     io::check_destination(&a.output, std::slice::from_ref(&a.input), a.force)?;
     let r = crate::radiance::read(&a.input)?;
     let lens = match (&a.lens, a.dome) {
-        (Some(p), None) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
-            LensProfile::from_json(&text).with_context(|| p.display().to_string())?
-        }
+        (Some(p), None) => crate::geometry::read_lens(p)?,
         (None, Some(kind)) => {
             // A cropped dome is square with the horizon circle inscribed.
             let c = skydome::image::Circle {
