@@ -136,3 +136,56 @@ fn banterle_alignment_files_out_of_order_merge() {
         "{files:?}"
     );
 }
+
+#[test]
+fn alpnach_fisheye_dome_finds_circle_and_sun() {
+    let Some(d) = shared() else { return };
+    let dir = d.join("skycam_alpnach_fisheye");
+    let tmp = tempfile::tempdir().unwrap();
+    // Frames 06..12; their times are not published, so rough ratios estimated from the pixels.
+    let files: Vec<PathBuf> = (6..=12)
+        .map(|i| {
+            dir.join(format!(
+                "Alpnach_20180129_11-09-20_ExposureStack_Image_{i:02}_image.png"
+            ))
+        })
+        .collect();
+    let o = Command::new(BIN)
+        .arg("merge")
+        .args(&files)
+        .args([
+            "--times",
+            "1,2,5,12,50,110,220",
+            "--fisheye",
+            "--lens-model",
+            "equidistant",
+        ])
+        .args([
+            "--fov", "185", "--crop", "--north", "0", "--json", "--quiet", "-o",
+        ])
+        .arg(tmp.path().join("alp.hdr"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let g = &s["geometry"];
+    let c = &g["lens"]["circle"];
+    // The circle of this camera: centre ≈ (150, 141), radius ≈ 130 (SOURCE.txt).
+    assert!((c["cx"].as_f64().unwrap() - 150.0).abs() < 2.0, "{c}");
+    assert!((c["cy"].as_f64().unwrap() - 141.0).abs() < 2.0, "{c}");
+    assert!((c["r"].as_f64().unwrap() - 131.0).abs() < 3.0, "{c}");
+    // The sun disc of the short frames sits at (83.5, 81.3) in the full frame; the crop moves
+    // the origin by the circle centre minus the horizon radius.
+    let off_x = c["cx"].as_f64().unwrap() - g["horizon"]["r"].as_f64().unwrap();
+    let off_y = c["cy"].as_f64().unwrap() - g["horizon"]["r"].as_f64().unwrap();
+    let sun = &g["sun"]["pixel"];
+    let (sx, sy) = (
+        sun["x"].as_f64().unwrap() + off_x,
+        sun["y"].as_f64().unwrap() + off_y,
+    );
+    assert_eq!(g["sun_source"], "detected");
+    assert!(
+        ((sx - 83.5).powi(2) + (sy - 81.3).powi(2)).sqrt() < 8.0,
+        "sun at ({sx}, {sy})"
+    );
+}
