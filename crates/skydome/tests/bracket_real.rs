@@ -1,18 +1,11 @@
 //! Decoding and validating the real photo sets in `../shared/data`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+mod common;
+use common::data_dir as shared;
 
 use skydome::bracket::{assemble, decode, DecodeOptions, OrientationPolicy};
-
-fn shared() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!("skipping: ../shared/data not found");
-        None
-    }
-}
 
 fn load(dir: &Path, names: &[&str]) -> Vec<skydome::bracket::DecodedFrame> {
     names

@@ -1,5 +1,8 @@
 //! Response calibration against ground truth, the dense SVD reference, OpenCV's measured
 //! figures and colour-hdri's reference curves.
+mod common;
+use common::data_dir;
+use common::load_jpegs;
 
 use skydome::bracket::{Exposure, Frame, Pixels};
 use skydome::response::{
@@ -8,23 +11,13 @@ use skydome::response::{
 };
 use skydome::sampling::{sample, SampleOptions};
 use skydome::synth::{generate, SynthOptions};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// OpenCV 5.0.0 `CalibrateDebevec(samples = 128, lambda = 10)` on `SynthOptions::default()`
 /// (seed 1), curve RMSE in stops per channel R, G, B over z = 10..=245 after removing the mean
 /// offset. Re-measure: `cargo run -p skydome --example synth_bracket -- /tmp/c --lambda 10`,
 /// then `python scripts/opencv_compare.py /tmp/c` (see docs/accuracy.md).
 const OPENCV_CURVE_RMSE_STOPS: [f64; 3] = [0.047, 0.040, 0.112];
-
-fn data_dir() -> Option<PathBuf> {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    if d.is_dir() {
-        Some(d)
-    } else {
-        eprintln!("skipping: ../shared/data not found");
-        None
-    }
-}
 
 /// RMS of `rec − truth` over z = 10..=245 after removing the mean offset, in stops.
 fn curve_rmse_stops(rec: &[f64], truth: &[f64]) -> f64 {
@@ -378,28 +371,6 @@ fn read_npy_f64(path: &Path) -> Vec<f64> {
         .chunks_exact(8)
         .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
         .collect()
-}
-
-pub fn load_jpegs(dir: &Path, files: &[(&str, f64)]) -> Vec<Frame> {
-    let mut frames: Vec<Frame> = files
-        .iter()
-        .map(|&(name, t)| {
-            let img = image::open(dir.join(name)).unwrap().to_rgb8();
-            Frame {
-                name: name.into(),
-                width: img.width() as usize,
-                height: img.height() as usize,
-                pixels: Pixels::U8(img.into_raw()),
-                exposure: Exposure {
-                    time_s: t,
-                    iso: None,
-                    f_number: None,
-                },
-            }
-        })
-        .collect();
-    frames.sort_by(|a, b| a.exposure.time_s.total_cmp(&b.exposure.time_s));
-    frames
 }
 
 #[test]

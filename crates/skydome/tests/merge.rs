@@ -1,11 +1,13 @@
 //! Radiance merge against ground truth, OpenCV's measured figures, and real brackets.
+mod common;
+use common::data_dir;
+use common::load_jpegs;
 
-use skydome::bracket::{Exposure, Frame, Pixels};
+use skydome::bracket::{Frame, Pixels};
 use skydome::compare::{compare, well_exposed_mask, CompareOptions};
 use skydome::merge::{merge, MergeError, MergeOptions, Weighting, CLIPPED_HIGH, CLIPPED_LOW};
 use skydome::response::{calibrate, CalibrateOptions, Response};
 use skydome::synth::{generate, SynthOptions};
-use std::path::{Path, PathBuf};
 
 /// OpenCV 5.0.0 `CalibrateDebevec(128 samples, λ = 10)` + `MergeDebevec` (its defaults) on
 /// `SynthOptions::default()` (seed 1), against the truth over pixels with all channels in
@@ -13,16 +15,6 @@ use std::path::{Path, PathBuf};
 /// percentile, log2 RMSE (stops). Re-measure with `cargo run -p skydome --example
 /// synth_bracket -- /tmp/m` and `python scripts/opencv_compare.py /tmp/m --lambda 10`.
 const OPENCV_MERGE: [f64; 3] = [0.0309, 0.0921, 0.0683];
-
-fn data_dir() -> Option<PathBuf> {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    if d.is_dir() {
-        Some(d)
-    } else {
-        eprintln!("skipping: ../shared/data not found");
-        None
-    }
-}
 
 fn per_channel() -> CompareOptions {
     CompareOptions {
@@ -210,28 +202,6 @@ fn mismatched_or_unsorted_frames_are_errors() {
         merge(&[], &r, &Default::default()),
         Err(MergeError::NoFrames)
     );
-}
-
-fn load_jpegs(dir: &Path, files: &[(&str, f64)]) -> Vec<Frame> {
-    let mut frames: Vec<Frame> = files
-        .iter()
-        .map(|&(name, t)| {
-            let img = image::open(dir.join(name)).unwrap().to_rgb8();
-            Frame {
-                name: name.into(),
-                width: img.width() as usize,
-                height: img.height() as usize,
-                pixels: Pixels::U8(img.into_raw()),
-                exposure: Exposure {
-                    time_s: t,
-                    iso: None,
-                    f_number: None,
-                },
-            }
-        })
-        .collect();
-    frames.sort_by(|a, b| a.exposure.time_s.total_cmp(&b.exposure.time_s));
-    frames
 }
 
 /// For every frame, the median over its well-exposed pixels (all channels in 20..=235) of
