@@ -41,33 +41,50 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     out.commit(&[], a.force)?;
     let p = |name: &str| dir.join(name).display().to_string();
     let b = |name: &str| bracket.join(name).display().to_string();
-    let frames = [b("frame_0.jpg"), b("frame_1.jpg"), b("frame_2.jpg")];
-    let times = ["--times-file".to_string(), b("times.txt")];
-    let force: &[&str] = if a.force { &["--force"] } else { &[] };
-    let quiet_flag: &[&str] = if quiet { &["--quiet"] } else { &[] };
+    let (f0, f1, f2, times) = (
+        b("frame_0.jpg"),
+        b("frame_1.jpg"),
+        b("frame_2.jpg"),
+        b("times.txt"),
+    );
+    // Every step reads the bundled bracket the same way.
+    let bracket_args = [f0.as_str(), &f1, &f2, "--times-file", &times];
 
-    let step = |args: Vec<String>| -> Result<()> {
-        let mut full = vec!["skydome".to_string()];
-        full.extend(args);
-        full.extend(force.iter().map(|s| s.to_string()));
-        full.extend(quiet_flag.iter().map(|s| s.to_string()));
+    let step = |args: &[&str]| -> Result<()> {
+        let mut full = vec!["skydome"];
+        full.extend_from_slice(args);
+        // `info` and `compare` write nothing, so they take no --force.
+        if a.force && !matches!(args.first(), Some(&"info" | &"compare")) {
+            full.push("--force");
+        }
+        if quiet {
+            full.push("--quiet");
+        }
         if !quiet {
             crate::out(&format!("\n$ {}", full.join(" ")));
         }
         crate::run_args(&full)
     };
-    let strs = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    let with_bracket = |cmd: &str, rest: &[&str]| -> Result<()> {
+        step(&[&[cmd][..], &bracket_args, rest].concat())
+    };
 
     // 1. The lens: detect the image circle; the bundled bracket was shot through an equidistant 235° lens.
+    let (lens_json, lens_overlay) = (p("lens.json"), p("lens_overlay.png"));
     step(
-        [
-            strs(&["lens", "detect"]),
-            frames.to_vec(),
-            times.to_vec(),
-            strs(&["--model", "equidistant", "--fov", "235", "-o"]),
-            vec![p("lens.json")],
-            strs(&["--overlay"]),
-            vec![p("lens_overlay.png")],
+        &[
+            &["lens", "detect"][..],
+            &bracket_args,
+            &[
+                "--model",
+                "equidistant",
+                "--fov",
+                "235",
+                "-o",
+                &lens_json,
+                "--overlay",
+                &lens_overlay,
+            ],
         ]
         .concat(),
     )?;
@@ -76,103 +93,77 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     let circle = format!("{:.3},{:.3},{:.3}", c.cx, c.cy, c.r);
 
     // 2. Calibrate the camera response once, sampling inside the circle.
-    step(
-        [
-            strs(&["calibrate"]),
-            frames.to_vec(),
-            times.to_vec(),
-            strs(&["--circle", &circle, "--repeat", "5", "-o"]),
-            vec![p("camera.json"), "--plot".into(), p("response.png")],
-        ]
-        .concat(),
+    let camera = p("camera.json");
+    with_bracket(
+        "calibrate",
+        &[
+            "--circle",
+            &circle,
+            "--repeat",
+            "5",
+            "-o",
+            &camera,
+            "--plot",
+            &p("response.png"),
+        ],
     )?;
 
     // 3. Merge with the profile, crop to the 180° dome, find the sun, mark north, make maps.
-    step(
-        [
-            strs(&["merge"]),
-            frames.to_vec(),
-            times.to_vec(),
-            strs(&["--profile"]),
-            vec![p("camera.json")],
-            strs(&["--lens"]),
-            vec![p("lens.json")],
-            strs(&["--crop", "--north", "0", "--sun", "auto", "-o"]),
-            vec![
-                p("sky.hdr"),
-                "--exr".into(),
-                p("sky.exr"),
-                "--preview".into(),
-                p("preview.jpg"),
-                "--overlay".into(),
-                p("overlay.png"),
-                "--equirect".into(),
-                p("sky_latlong.hdr"),
-            ],
-        ]
-        .concat(),
+    let (sky, latlong) = (p("sky.hdr"), p("sky_latlong.hdr"));
+    with_bracket(
+        "merge",
+        &[
+            "--profile",
+            &camera,
+            "--lens",
+            &lens_json,
+            "--crop",
+            "--north",
+            "0",
+            "--sun",
+            "auto",
+            "-o",
+            &sky,
+            "--exr",
+            &p("sky.exr"),
+            "--preview",
+            &p("preview.jpg"),
+            "--overlay",
+            &p("overlay.png"),
+            "--equirect",
+            &latlong,
+        ],
     )?;
 
-    // 4. Accuracy against the ground truth the bracket was rendered from (uncropped merge).
-    step(
-        [
-            strs(&["merge"]),
-            frames.to_vec(),
-            times.to_vec(),
-            strs(&["--profile"]),
-            vec![p("camera.json"), "-o".into(), p("full.hdr")],
-        ]
-        .concat(),
-    )?;
-    // Inside the 180° horizon, after one scale per channel (a response is known up to one
+    // 4. Accuracy against the ground truth the bracket was rendered from (uncropped merge),
+    // inside the 180° horizon, after one scale per channel (a response is known up to one
     // constant per channel, so a bracket alone fixes white balance only up to that constant).
+    let full = p("full.hdr");
+    with_bracket("merge", &["--profile", &camera, "-o", &full])?;
     let horizon = lens.radius_at_deg(90.0).context("lens")?;
     let dome = format!("{:.3},{:.3},{:.3}", c.cx, c.cy, horizon);
-    step(
-        [
-            strs(&["compare"]),
-            vec![
-                p("full.hdr"),
-                b("truth.hdr"),
-                "--per-channel".into(),
-                "--circle".into(),
-                dome,
-            ],
-        ]
-        .concat(),
-    )?;
+    step(&[
+        "compare",
+        &full,
+        &b("truth.hdr"),
+        "--per-channel",
+        "--circle",
+        &dome,
+    ])?;
 
     // 5. Pictures.
-    step(
-        [
-            strs(&["tonemap"]),
-            vec![p("sky.hdr"), "-o".into(), p("tonemap_minmax.png")],
-            strs(&["--op", "minmax"]),
-        ]
-        .concat(),
-    )?;
-    step(
-        [
-            strs(&["falsecolor"]),
-            vec![p("sky.hdr"), "-o".into(), p("falsecolor.png")],
-        ]
-        .concat(),
-    )?;
-    step(
-        [
-            strs(&["histogram"]),
-            vec![p("sky.hdr"), "-o".into(), p("histogram.png")],
-        ]
-        .concat(),
-    )?;
-    step(
-        [
-            strs(&["render"]),
-            vec![p("sky_latlong.hdr"), "-o".into(), p("spheres.png")],
-        ]
-        .concat(),
-    )?;
-    step([strs(&["info"]), vec![p("sky.hdr")]].concat())?;
+    step(&[
+        "tonemap",
+        &sky,
+        "-o",
+        &p("tonemap_minmax.png"),
+        "--op",
+        "minmax",
+    ])?;
+    step(&["falsecolor", &sky, "-o", &p("falsecolor.png")])?;
+    step(&["histogram", &sky, "-o", &p("histogram.png")])?;
+    step(&["render", &latlong, "-o", &p("spheres.png")])?;
+    step(&["info", &sky])?;
     if !dir.join("sky.hdr").is_file() {
         bail!("{}: the demo did not produce sky.hdr", dir.display());
     }

@@ -82,7 +82,7 @@ fn main() -> ExitCode {
 
 /// Parses a full command line (with the program name first) and runs it; `demo` uses this to
 /// run the same commands a user would type.
-pub fn run_args(args: &[String]) -> anyhow::Result<()> {
+pub fn run_args(args: &[&str]) -> anyhow::Result<()> {
     dispatch(Cli::try_parse_from(args)?)
 }
 

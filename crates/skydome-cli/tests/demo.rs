@@ -50,4 +50,21 @@ fn demo_writes_every_output_and_marks_the_known_sun() {
         .and_then(|s| s.parse().ok())
         .unwrap_or_else(|| panic!("no compare output in {stdout}"));
     assert!(median < 4.0, "median relative error {median} %");
+    // A second run over the same folder needs --force, and then succeeds.
+    let again = Command::new(BIN)
+        .args(["demo", "--quiet", "-o"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(again.status.code(), Some(1));
+    let forced = Command::new(BIN)
+        .args(["demo", "--quiet", "--force", "-o"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        forced.status.success(),
+        "{}",
+        String::from_utf8_lossy(&forced.stderr)
+    );
 }
