@@ -2,8 +2,11 @@
 //!
 //! - `calibrate/schur_100`, `calibrate/schur_600`: the default solver, 3 channels, 3 frames;
 //!   `calibrate/dense_svd_100`: the seed's dense SVD of the same system (the ratio to beat).
-//! - `merge_6mp/lut`: [`merge`] of 3 frames of 2448 × 2448; `merge_6mp/memory_floor`: just
-//!   reads the same input bytes and writes an output of the same size (the floor), and
+//! - `merge_6mp/lut`: [`merge`] of 3 frames of 2448 × 2448 into a fresh output;
+//!   `merge_6mp/memory_floor`: just reads the same input bytes and writes a fresh output of the
+//!   same size (the floor); `merge_6mp/lut_into` and `merge_6mp/memory_floor_into`: the same
+//!   with the output buffer reused ([`merge_into`]), which spares the page faults;
+//!   `merge_6mp/lut_into_with_confidence_and_mask`: also the confidence and clipped mask;
 //!   `merge_6mp/naive`: a straightforward per-pixel `ln`/`exp` weighted merge on one thread
 //!   (the peer a simple implementation gives).
 //!
@@ -11,7 +14,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use skydome::bracket::{Frame, Pixels};
-use skydome::merge::{merge, MergeOptions};
+use skydome::merge::{merge, merge_into, MergeOptions};
 use skydome::response::{calibrate_samples, solve_dense_svd, Response, Solver};
 use skydome::sampling::{sample, SampleOptions};
 use skydome::synth::{generate, SynthOptions};
@@ -65,10 +68,10 @@ fn memory_floor(frames: &[Frame], out: &mut [f32]) {
         .collect();
     let band = 3 * 2448 * 16;
     let body = |(k, o): (usize, &mut [f32])| {
-        let off = k * band;
-        for (i, v) in o.iter_mut().enumerate() {
-            *v = (srcs[0][off + i] as u32 + srcs[1][off + i] as u32 + srcs[2][off + i] as u32)
-                as f32;
+        let r = k * band..k * band + o.len();
+        let (a, b, c) = (&srcs[0][r.clone()], &srcs[1][r.clone()], &srcs[2][r]);
+        for (((v, &a), &b), &c) in o.iter_mut().zip(a).zip(b).zip(c) {
+            *v = (a as u32 + b as u32 + c as u32) as f32;
         }
     };
     #[cfg(feature = "parallel")]
@@ -106,24 +109,33 @@ fn merging(c: &mut Criterion) {
     let mut out = vec![0f32; frames[0].pixels.len()];
     let mut g = c.benchmark_group("merge_6mp");
     g.sample_size(10);
+    // A fresh output each time, as `merge` returns it: includes the page faults of 72 MB.
     g.bench_function("lut", |b| {
         b.iter(|| merge(black_box(&frames), &r, &MergeOptions::default()).unwrap())
     });
-    g.bench_function("lut_with_confidence_and_mask", |b| {
-        let o = MergeOptions {
-            confidence: true,
-            clipped_mask: true,
-            ..Default::default()
-        };
-        b.iter(|| merge(black_box(&frames), &r, &o).unwrap())
-    });
     g.bench_function("memory_floor", |b| {
         b.iter(|| {
-            // Allocate like the merge does, so the floor pays the same page faults.
             let mut o = vec![0f32; frames[0].pixels.len()];
             memory_floor(black_box(&frames), &mut o);
             o
         })
+    });
+    // The output buffer reused, as `merge_into` allows.
+    let mut m = merge(&frames, &r, &MergeOptions::default()).unwrap();
+    g.bench_function("lut_into", |b| {
+        b.iter(|| merge_into(black_box(&frames), &r, &MergeOptions::default(), &mut m).unwrap())
+    });
+    g.bench_function("memory_floor_into", |b| {
+        b.iter(|| memory_floor(black_box(&frames), &mut out))
+    });
+    let o = MergeOptions {
+        confidence: true,
+        clipped_mask: true,
+        ..Default::default()
+    };
+    let mut mc = merge(&frames, &r, &o).unwrap();
+    g.bench_function("lut_into_with_confidence_and_mask", |b| {
+        b.iter(|| merge_into(black_box(&frames), &r, &o, &mut mc).unwrap())
     });
     g.bench_function("naive", |b| {
         b.iter(|| naive(black_box(&frames), &r, &mut out))
