@@ -142,7 +142,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
                 WeightingArg::Hat => Weighting::Hat,
                 WeightingArg::None => Weighting::None,
             },
-            confidence: true,
+            confidence: a.confidence.is_some(),
             clipped_mask: false,
         },
     )

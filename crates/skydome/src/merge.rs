@@ -43,7 +43,7 @@
 use crate::bracket::{Frame, Pixels};
 use crate::image::HdrImage;
 pub use crate::response::Weighting;
-use crate::response::{hat, Response, LEVELS};
+use crate::response::{Response, LEVELS};
 
 /// [`Merged::clipped`] bit: the pixel is saturated (code 255 or the hat's zero) in every frame in
 /// some channel; its value is the shortest frame's lower bound.
@@ -214,8 +214,7 @@ pub fn merge_into(
                 })
                 .collect();
             let luts = Tables::<65536>::new(&lt, opts.weighting, |c, v| response.g16(c, v as u16));
-            let hat_lut: Box<[f32; 65536]> = boxed_table(|v| hat_f(v as f32 / 257.0) / W_MAX);
-            run_bands(&srcs, &luts, &hat_lut, w, data, conf, clip)
+            run_bands(&srcs, &luts, w, data, conf, clip)
         }
         _ => {
             let srcs: Vec<&[u8]> = frames
@@ -226,8 +225,7 @@ pub fn merge_into(
                 })
                 .collect();
             let luts = Tables::<LEVELS>::new(&lt, opts.weighting, |c, z| response.curve(c)[z]);
-            let hat_lut: Box<[f32; LEVELS]> = boxed_table(|z| hat(z as u8) as f32 / W_MAX);
-            run_bands(&srcs, &luts, &hat_lut, w, data, conf, clip)
+            run_bands(&srcs, &luts, w, data, conf, clip)
         }
     };
     out.clipped_high = clipped_high;
@@ -267,15 +265,6 @@ fn weight(z: f32, j: usize, p: usize, weighting: Weighting) -> f32 {
             }
             w
         }
-    }
-}
-
-/// A table of `N` values on the heap (65 536-entry tables are too big for the stack).
-fn boxed_table<T: Copy, const N: usize>(f: impl Fn(usize) -> T) -> Box<[T; N]> {
-    let v: Vec<T> = (0..N).map(f).collect();
-    match v.into_boxed_slice().try_into() {
-        Ok(b) => b,
-        Err(_) => unreachable!("collected exactly N entries"),
     }
 }
 
@@ -323,25 +312,39 @@ trait Code: Copy + Sync + PartialEq {
     const MAX: Self;
     /// Lowest code.
     const ZERO: Self;
+    /// The hat weight in this type's units, [`HAT_PEAK`](Code::HAT_PEAK) at mid-grey.
+    const HAT_PEAK: u32;
     /// Table index.
     fn index(self) -> usize;
+    /// The hat `min(v, MAX − v)` in this type's units (`257 ×` the 8-bit hat for 16-bit input).
+    fn hat_units(self) -> u32;
 }
 
 impl Code for u8 {
     const MAX: u8 = u8::MAX;
     const ZERO: u8 = 0;
+    const HAT_PEAK: u32 = 127;
     #[inline(always)]
     fn index(self) -> usize {
         self as usize
+    }
+    #[inline(always)]
+    fn hat_units(self) -> u32 {
+        self.min(u8::MAX - self) as u32
     }
 }
 
 impl Code for u16 {
     const MAX: u16 = u16::MAX;
     const ZERO: u16 = 0;
+    const HAT_PEAK: u32 = 127 * 257;
     #[inline(always)]
     fn index(self) -> usize {
         self as usize
+    }
+    #[inline(always)]
+    fn hat_units(self) -> u32 {
+        self.min(u16::MAX - self) as u32
     }
 }
 
@@ -353,7 +356,6 @@ type Band<'a> = (usize, &'a mut [f32], &'a mut [f32], &'a mut [u8]);
 fn run_bands<T: Code, const N: usize>(
     srcs: &[&[T]],
     luts: &Tables<N>,
-    hat_lut: &[f32; N],
     w: usize,
     out: &mut [f32],
     conf: &mut [f32],
@@ -377,7 +379,7 @@ fn run_bands<T: Code, const N: usize>(
         })
         .collect();
     debug_assert_eq!(jobs.len(), bands);
-    let work = |(off, o, c, m): Band<'_>| merge_band(srcs, luts, hat_lut, w, off, o, c, m);
+    let work = |(off, o, c, m): Band<'_>| merge_band(srcs, luts, w, off, o, c, m);
     let add = |a: (usize, usize), b: (usize, usize)| (a.0 + b.0, a.1 + b.1);
     #[cfg(feature = "parallel")]
     {
@@ -505,7 +507,6 @@ fn accumulate_group<T: Code, const N: usize, const MODE: u8>(
 fn merge_band<T: Code, const N: usize>(
     srcs: &[&[T]],
     luts: &Tables<N>,
-    hat_lut: &[f32; N],
     w: usize,
     off: usize,
     out: &mut [f32],
@@ -515,7 +516,7 @@ fn merge_band<T: Code, const N: usize>(
     const GROUP: usize = 3;
     let row = 3 * w;
     let mut den = vec![0f32; if srcs.len() > GROUP { row } else { 0 }];
-    let mut hs = vec![0f32; if conf.is_empty() { 0 } else { row }];
+    let mut hs = vec![0u32; if conf.is_empty() { 0 } else { row }];
     let mut ext = vec![0u8; row];
     let mut rows: Vec<&[T]> = Vec::with_capacity(srcs.len());
     let (mut high, mut low) = (0usize, 0usize);
@@ -560,14 +561,16 @@ fn merge_band<T: Code, const N: usize>(
         low += l;
 
         if !conf.is_empty() {
-            hs.fill(0.0);
+            // Integer hat sums (`min(v, max − v)`, exact and vectorisable), then per pixel the
+            // least-supported channel as a fraction of the peak weight.
+            hs.fill(0);
             for s in &rows {
                 for (h, &v) in hs.iter_mut().zip(s.iter()) {
-                    *h += hat_lut[v.index()];
+                    *h += v.hat_units();
                 }
             }
             for (c, hh) in conf[prow..prow + w].iter_mut().zip(hs.chunks_exact(3)) {
-                *c = hh[0].min(hh[1]).min(hh[2]).min(1.0);
+                *c = hh[0].min(hh[1]).min(hh[2]).min(T::HAT_PEAK) as f32 / T::HAT_PEAK as f32;
             }
         }
     }
@@ -724,13 +727,11 @@ mod tests {
 
     #[test]
     fn tables_and_groups_match_the_definition_for_1_to_7_frames() {
-        let r = Response::from_curves(
-            [0.9, 1.0, 1.1].map(|a| {
-                (0..LEVELS)
-                    .map(|z| a * ((z as f64 + 0.5) / 128.5).ln())
-                    .collect::<Vec<_>>()
-            }),
-        )
+        let r = Response::from_curves([0.9, 1.0, 1.1].map(|a| {
+            (0..LEVELS)
+                .map(|z| a * ((z as f64 + 0.5) / 128.5).ln())
+                .collect::<Vec<_>>()
+        }))
         .unwrap();
         for sixteen in [false, true] {
             for p in 1..=7 {
@@ -766,6 +767,21 @@ mod tests {
                     let conf = m.confidence.as_ref().unwrap();
                     for (k, (&f, &c)) in clip.iter().zip(conf).enumerate() {
                         assert_eq!(f != 0, c == 0.0, "pixel {k}: flag {f}, confidence {c}");
+                        let want = (0..3)
+                            .map(|ch| {
+                                let sum: f64 = fs
+                                    .iter()
+                                    .map(|f| match &f.pixels {
+                                        Pixels::U8(v) => crate::response::hat(v[3 * k + ch]),
+                                        Pixels::U16(v) => {
+                                            crate::response::hat_f(v[3 * k + ch] as f64 / 257.0)
+                                        }
+                                    })
+                                    .sum();
+                                (sum / 127.0).min(1.0)
+                            })
+                            .fold(1.0, f64::min);
+                        assert!((c as f64 - want).abs() < 1e-6, "pixel {k}: {c} vs {want}");
                     }
                     if p == 1 {
                         assert!(high > 0 && low > 0, "{high} {low}");

@@ -391,6 +391,7 @@ impl Acc {
             self.zero += 1;
         }
     }
+    #[cfg(feature = "parallel")]
     fn merge(mut self, o: Acc) -> Acc {
         self.count += o.count;
         self.inf += o.inf;

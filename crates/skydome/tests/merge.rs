@@ -5,7 +5,9 @@ use common::load_jpegs;
 
 use skydome::bracket::{Frame, Pixels};
 use skydome::compare::{compare, well_exposed_mask, CompareOptions};
-use skydome::merge::{merge, MergeError, MergeOptions, Weighting, CLIPPED_HIGH, CLIPPED_LOW};
+use skydome::merge::{
+    merge, merge_into, MergeError, MergeOptions, Weighting, CLIPPED_HIGH, CLIPPED_LOW,
+};
 use skydome::response::{calibrate, CalibrateOptions, Response};
 use skydome::synth::{generate, SynthOptions};
 
@@ -202,6 +204,44 @@ fn mismatched_or_unsorted_frames_are_errors() {
         merge(&[], &r, &Default::default()),
         Err(MergeError::NoFrames)
     );
+}
+
+#[test]
+fn merge_into_reuses_buffers_and_matches_merge() {
+    let small = generate(&SynthOptions {
+        width: 96,
+        height: 80,
+        ..Default::default()
+    })
+    .unwrap();
+    let big = generate(&SynthOptions {
+        width: 128,
+        height: 128,
+        ..Default::default()
+    })
+    .unwrap();
+    let r = Response::from_curves(big.true_g.clone()).unwrap();
+    let all = MergeOptions {
+        confidence: true,
+        clipped_mask: true,
+        ..Default::default()
+    };
+    let mut m = merge(&big.frames, &r, &all).unwrap();
+    let ptr = m.radiance.data.as_ptr();
+    // Same size, fewer extras: the radiance buffer is reused, the extras dropped.
+    merge_into(&big.frames[..2], &r, &MergeOptions::default(), &mut m).unwrap();
+    assert_eq!(m.radiance.data.as_ptr(), ptr);
+    assert_eq!(m, merge(&big.frames[..2], &r, &MergeOptions::default()).unwrap());
+    // Another size, extras again.
+    merge_into(&small.frames, &r, &all, &mut m).unwrap();
+    assert_eq!(m, merge(&small.frames, &r, &all).unwrap());
+    assert_eq!((m.radiance.width, m.radiance.height), (96, 80));
+    // An error leaves the previous result untouched.
+    let before = m.clone();
+    let mut bad = small.frames.clone();
+    bad.reverse();
+    assert!(merge_into(&bad, &r, &all, &mut m).is_err());
+    assert_eq!(m, before);
 }
 
 /// For every frame, the median over its well-exposed pixels (all channels in 20..=235) of
