@@ -231,7 +231,10 @@ fn merge_into_reuses_buffers_and_matches_merge() {
     // Same size, fewer extras: the radiance buffer is reused, the extras dropped.
     merge_into(&big.frames[..2], &r, &MergeOptions::default(), &mut m).unwrap();
     assert_eq!(m.radiance.data.as_ptr(), ptr);
-    assert_eq!(m, merge(&big.frames[..2], &r, &MergeOptions::default()).unwrap());
+    assert_eq!(
+        m,
+        merge(&big.frames[..2], &r, &MergeOptions::default()).unwrap()
+    );
     // Another size, extras again.
     merge_into(&small.frames, &r, &all, &mut m).unwrap();
     assert_eq!(m, merge(&small.frames, &r, &all).unwrap());
