@@ -8,7 +8,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use skydome::formats::exr::{encode_exr, read_exr, ExrPixelType, Limits as ExrLimits};
+use skydome::formats::exr::{
+    encode_exr, read_exr, ExrCompression, ExrOptions, ExrPixelType, Limits as ExrLimits,
+};
 use skydome::formats::rgbe::{decode_rgbe, encode_rgbe, Limits};
 use skydome::formats::{HdrMeta, PixelPoint, SunMark};
 use skydome::HdrImage;
@@ -117,9 +119,23 @@ fn opencv_and_openimageio_read_our_hdr_and_exr_files() {
         let mut files = vec![serde_json::json!({
             "file": format!("{name}.hdr"), "expect": format!("{name}.hdr.f32"), "kind": "hdr"
         })];
-        for (t, kind) in [(ExrPixelType::Half, "half"), (ExrPixelType::Float, "float")] {
-            let exr = encode_exr(img, &m, t).unwrap();
-            let file = format!("{name}.{kind}.exr");
+        let variants = [
+            (ExrPixelType::Half, "half", ExrCompression::Zip),
+            (ExrPixelType::Float, "float", ExrCompression::Zip),
+            (ExrPixelType::Half, "half", ExrCompression::Piz),
+            (ExrPixelType::Float, "float", ExrCompression::Piz),
+            (ExrPixelType::Half, "half", ExrCompression::Rle),
+            (ExrPixelType::Float, "float", ExrCompression::Zips),
+            (ExrPixelType::Half, "half", ExrCompression::None),
+        ];
+        for (t, kind, compression) in variants {
+            let opts = ExrOptions {
+                pixel_type: t,
+                compression,
+            };
+            let exr = encode_exr(img, &m, opts).unwrap();
+            let comp = format!("{compression:?}").to_lowercase();
+            let file = format!("{name}.{kind}.{comp}.exr");
             std::fs::write(dir.path().join(&file), &exr).unwrap();
             let stored = read_exr(&exr, &ExrLimits::default()).unwrap().image.data;
             if t == ExrPixelType::Float {
@@ -171,7 +187,7 @@ fn opencv_and_openimageio_read_our_hdr_and_exr_files() {
     let (name, img) = &cases[1];
     let mut wrong = img.data.clone();
     wrong[46] = wrong[46] * 1.01 + 0.01;
-    let expect = dir.path().join(format!("{name}.float.exr.f32"));
+    let expect = dir.path().join(format!("{name}.float.zip.exr.f32"));
     let original = std::fs::read(&expect).unwrap();
     dump(&expect, &wrong);
     let out = Command::new(&py)
