@@ -206,7 +206,7 @@ fn opencv_and_openimageio_read_our_hdr_and_exr_files() {
     let (name, _) = &cases[0];
     let hdr = dir.path().join(format!("{name}.hdr"));
     let exr = dir.path().join(format!("{name}.exr"));
-    std::fs::copy(dir.path().join(format!("{name}.half.exr")), &exr).unwrap();
+    std::fs::copy(dir.path().join(format!("{name}.half.zip.exr")), &exr).unwrap();
     let out = Command::new(&py)
         .arg(&script)
         .arg("--check")
