@@ -27,9 +27,8 @@ pub struct Args {
     /// Also write an OpenEXR file.
     #[arg(long, value_name = "FILE.exr")]
     pub exr: Option<PathBuf>,
-    /// Write EXR channels as 32-bit float instead of half.
-    #[arg(long)]
-    pub exr_float: bool,
+    #[command(flatten)]
+    pub exr_args: crate::radiance::ExrArgs,
     /// Also write a tone-mapped preview (.jpg or .png).
     #[arg(long, value_name = "FILE")]
     pub preview: Option<PathBuf>,
@@ -196,10 +195,10 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     let mut outputs = Outputs::default();
     outputs.add(
         &a.output,
-        crate::radiance::encode(&a.output, &image, &meta, a.exr_float)?,
+        crate::radiance::encode(&a.output, &image, &meta, &a.exr_args)?,
     );
     if let Some(p) = &a.exr {
-        outputs.add(p, crate::radiance::encode(p, &image, &meta, a.exr_float)?);
+        outputs.add(p, crate::radiance::encode(p, &image, &meta, &a.exr_args)?);
     }
     if let Some(p) = &a.preview {
         outputs.add(
@@ -216,7 +215,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
             gmt: meta.gmt.clone(),
             ..HdrMeta::default()
         };
-        outputs.add(p, crate::radiance::encode(p, e, &m, a.exr_float)?);
+        outputs.add(p, crate::radiance::encode(p, e, &m, &a.exr_args)?);
     }
     if let (Some(p), Some(m)) = (&a.geometry.overlay, &marks) {
         outputs.add(p, geometry::overlay_picture(p, &image, m)?);

@@ -6,6 +6,46 @@ use anyhow::{bail, Context, Result};
 use skydome::formats::{exr, rgbe, HdrMeta};
 use skydome::HdrImage;
 
+/// How `.exr` outputs are written.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct ExrArgs {
+    /// Write EXR channels as 32-bit float instead of half.
+    #[arg(long)]
+    pub exr_float: bool,
+    /// EXR compression (all lossless): zip (OpenEXR's default), piz (smaller and faster for
+    /// photographs), zips, rle, none.
+    #[arg(long, value_enum, default_value_t = CompressionArg::Zip)]
+    pub exr_compression: CompressionArg,
+}
+
+/// `--exr-compression` values.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum CompressionArg {
+    /// No compression.
+    None,
+    /// Run-length.
+    Rle,
+    /// Deflate, one line per block.
+    Zips,
+    /// Deflate, 16 lines per block.
+    #[default]
+    Zip,
+    /// Wavelet.
+    Piz,
+}
+
+impl From<CompressionArg> for exr::ExrCompression {
+    fn from(c: CompressionArg) -> Self {
+        match c {
+            CompressionArg::None => exr::ExrCompression::None,
+            CompressionArg::Rle => exr::ExrCompression::Rle,
+            CompressionArg::Zips => exr::ExrCompression::Zips,
+            CompressionArg::Zip => exr::ExrCompression::Zip,
+            CompressionArg::Piz => exr::ExrCompression::Piz,
+        }
+    }
+}
+
 /// A radiance map read from disk.
 pub struct Radiance {
     /// Pixels as radiance: stored values divided by the file's `EXPOSURE`.
@@ -64,9 +104,9 @@ fn unexpose(image: &mut HdrImage, exposure: Option<f64>) {
 const HALF_MAX: f32 = 65504.0;
 
 /// Encodes a radiance map for `path` by its extension: `.hdr` (RGBE) or `.exr` (half float
-/// unless `float`, or unless the values exceed half's range: then 32-bit float, with a warning,
-/// because half would turn them into infinity).
-pub fn encode(path: &Path, image: &HdrImage, meta: &HdrMeta, float: bool) -> Result<Vec<u8>> {
+/// unless `--exr-float`, or unless the values exceed half's range: then 32-bit float, with a
+/// warning, because half would turn them into infinity).
+pub fn encode(path: &Path, image: &HdrImage, meta: &HdrMeta, opts: &ExrArgs) -> Result<Vec<u8>> {
     let name = path.display();
     match crate::io::extension(path).as_str() {
         "hdr" | "pic" | "rgbe" => rgbe::encode_rgbe(image, meta).with_context(|| name.to_string()),
@@ -77,19 +117,22 @@ pub fn encode(path: &Path, image: &HdrImage, meta: &HdrMeta, float: bool) -> Res
                 .copied()
                 .filter(|v| v.is_finite())
                 .fold(0.0f32, f32::max);
-            let float = float || max > HALF_MAX;
+            let float = opts.exr_float || max > HALF_MAX;
             if float && max > HALF_MAX {
                 crate::io::warn(
                     false,
                     &format!("{name}: values up to {max:.3e} exceed half-float range; writing 32-bit float channels"),
                 );
             }
-            let t = if float {
-                exr::ExrPixelType::Float
-            } else {
-                exr::ExrPixelType::Half
+            let o = exr::ExrOptions {
+                pixel_type: if float {
+                    exr::ExrPixelType::Float
+                } else {
+                    exr::ExrPixelType::Half
+                },
+                compression: opts.exr_compression.into(),
             };
-            exr::encode_exr(image, meta, t).with_context(|| name.to_string())
+            exr::encode_exr(image, meta, o).with_context(|| name.to_string())
         }
         e => bail!("{name}: cannot write '.{e}' radiance files; use .hdr or .exr"),
     }

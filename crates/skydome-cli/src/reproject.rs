@@ -40,6 +40,8 @@ pub struct Args {
     /// Azimuth at the centre of the map, degrees (90 = east: Blender's +X east, +Y north).
     #[arg(long, allow_hyphen_values = true, default_value_t = 90.0)]
     pub centre_azimuth: f64,
+    #[command(flatten)]
+    pub exr: crate::radiance::ExrArgs,
     /// Lower hemisphere: black, mirror, or a constant R,G,B radiance.
     #[arg(long, default_value = "black", value_parser = crate::geometry::parse_ground)]
     pub ground: Ground,
@@ -125,7 +127,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     let mut out = Outputs::default();
     out.add(
         &a.output,
-        crate::radiance::encode(&a.output, &map, &meta, false)?,
+        crate::radiance::encode(&a.output, &map, &meta, &a.exr)?,
     );
     for p in out.commit(std::slice::from_ref(&a.input), a.force)? {
         if !quiet {

@@ -78,7 +78,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     let truth = a.output.join("truth.hdr");
     out.add(
         &truth,
-        crate::radiance::encode(&truth, &b.truth, &HdrMeta::default(), false)?,
+        crate::radiance::encode(&truth, &b.truth, &HdrMeta::default(), &Default::default())?,
     );
     let mut csv = String::from("z,g_red,g_green,g_blue\n");
     for z in 0..256 {

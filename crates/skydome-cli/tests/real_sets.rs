@@ -106,13 +106,19 @@ fn banterle_room_merges_seven_frames() {
     let tmp = tempfile::tempdir().unwrap();
     let names: Vec<String> = (0..7).map(|i| format!("stack_room_exp_{i}.jpg")).collect();
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+    // PIZ here (the independent readers check it); the other sets use the default ZIP.
     let s = merge_set(
         &d.join("banterle_room"),
         &refs,
-        &[],
+        &["--exr-compression", "piz"],
         &tmp.path().join("room"),
     );
     assert_eq!(s["frames"].as_array().unwrap().len(), 7);
+    let meta = exr::meta::MetaData::read_from_file(tmp.path().join("room.exr"), false).unwrap();
+    assert_eq!(
+        meta.headers[0].compression,
+        exr::compression::Compression::PIZ
+    );
 }
 
 #[test]

@@ -125,9 +125,9 @@ pub enum ExrPixelType {
     Float,
 }
 
-/// Lossless compression of the written blocks. Measured on a 6 MP merged sky-dome, half
-/// float, 2 cores (`skydome merge --exr`): ZIP 8.0 MB, PIZ 7.4 MB and ≈ 1.5× faster to write,
-/// RLE 16 MB and ≈ 2× faster, none 36 MB.
+/// Lossless compression of the written blocks. Measured on a 6 MP synthetic merged sky-dome,
+/// half float, 2 cores (the EXR part of `skydome merge --exr`): ZIP 8.0 MB in 0.54 s, PIZ
+/// 7.4 MB in 0.31 s, RLE 16 MB in 0.22 s, none 36 MB in 0.27 s.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum ExrCompression {
     /// No compression.
@@ -367,9 +367,7 @@ pub fn encode_exr(
     match opts.pixel_type {
         ExrPixelType::Float => {
             let layer = Layer::new((w, h), attrs, encoding, SpecificChannels::rgb(at));
-            Image::from_layer(layer)
-                .write()
-                .to_buffered(&mut out)?;
+            Image::from_layer(layer).write().to_buffered(&mut out)?;
         }
         ExrPixelType::Half => {
             let half = |v: f32| {
@@ -384,9 +382,7 @@ pub fn encode_exr(
                 (half(r), half(g), half(b))
             };
             let layer = Layer::new((w, h), attrs, encoding, SpecificChannels::rgb(at_half));
-            Image::from_layer(layer)
-                .write()
-                .to_buffered(&mut out)?;
+            Image::from_layer(layer).write().to_buffered(&mut out)?;
         }
     }
     Ok(out.into_inner())
