@@ -5,7 +5,9 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use image::ImageDecoder;
-use skydome::formats::exr::{encode_exr, read_exr, ExrPixelType, Limits as ExrLimits};
+use skydome::formats::exr::{
+    encode_exr, read_exr, ExrCompression, ExrOptions, ExrPixelType, Limits as ExrLimits,
+};
 use skydome::formats::rgbe::{decode_rgbe, encode_rgbe, float_to_rgbe, Limits};
 use skydome::formats::HdrMeta;
 use skydome::HdrImage;
@@ -88,12 +90,19 @@ fn bench(c: &mut Criterion) {
 
     let mut g = c.benchmark_group("exr_6mp");
     g.sample_size(10);
-    for (name, t) in [
-        ("encode_half", ExrPixelType::Half),
-        ("encode_float", ExrPixelType::Float),
+    // The library alone compresses on one thread (the CLI turns on exr's `rayon` feature).
+    for (name, pixel_type, compression) in [
+        ("encode_half", ExrPixelType::Half, ExrCompression::Zip),
+        ("encode_float", ExrPixelType::Float, ExrCompression::Zip),
+        ("encode_half_piz", ExrPixelType::Half, ExrCompression::Piz),
+        ("encode_half_rle", ExrPixelType::Half, ExrCompression::Rle),
     ] {
+        let o = ExrOptions {
+            pixel_type,
+            compression,
+        };
         g.bench_function(name, |b| {
-            b.iter(|| black_box(encode_exr(black_box(&img), &meta, t).unwrap()))
+            b.iter(|| black_box(encode_exr(black_box(&img), &meta, o).unwrap()))
         });
     }
     let half = encode_exr(&img, &meta, ExrPixelType::Half).unwrap();
