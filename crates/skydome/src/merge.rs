@@ -401,10 +401,11 @@ const ONLY: u8 = 0;
 const FIRST: u8 = 1;
 const LATER: u8 = 2;
 
-/// Adds the votes of `G` frames (`srcs`, one row each, and their tables per channel) to
-/// one row of sums `num` (`Σ w · log2 E_j`) and `den` (`Σ w`). The frames are taken a few at
-/// a time so each sample's sums stay in registers; the tables are fixed-size so look-ups need
-/// no bounds checks. The division is left to [`finish_row`], where it vectorises.
+/// Adds the votes of `G` frames (`srcs`, one row each, and their tables per channel) to one
+/// row per `MODE`: the mean itself for the only group, else the sums `num` (`Σ w · log2 E_j`)
+/// and `den` (`Σ w`). The frames are taken a few at a time so each sample's sums stay in
+/// registers; the tables are fixed-size so look-ups need no bounds checks; samples go in
+/// blocks of four pixels so the division vectorises.
 #[inline(always)]
 fn accumulate<T: Code, const N: usize, const G: usize, const MODE: u8>(
     srcs: [&[T]; G],
