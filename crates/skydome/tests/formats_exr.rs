@@ -1,6 +1,8 @@
 //! OpenEXR: round trips (half/float), metadata mapping, real files from other software compared
 //! with the `exr` crate's generic reader, and hostile input.
 
+mod common;
+use common::data_dir;
 use std::path::{Path, PathBuf};
 
 use exr::prelude::{f16, ReadChannels, ReadLayers};
@@ -9,16 +11,6 @@ use skydome::formats::exr::{
 };
 use skydome::formats::{HdrMeta, PixelPoint, SunMark};
 use skydome::HdrImage;
-
-fn shared_data() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!("skipping: ../shared/data not found");
-        None
-    }
-}
 
 fn test_image(width: usize, height: usize) -> HdrImage {
     let mut img = HdrImage::new(width, height);
@@ -364,7 +356,7 @@ fn direct(path: &Path) -> Option<Direct> {
 
 #[test]
 fn real_exr_files_match_the_exr_crate_channel_reader() {
-    let Some(dir) = shared_data() else { return };
+    let Some(dir) = data_dir() else { return };
     let files = exr_files(&dir);
     assert!(
         files.len() >= 18,
@@ -455,7 +447,7 @@ fn real_exr_files_match_the_exr_crate_channel_reader() {
 
 #[test]
 fn known_properties_of_real_exr_files_are_recovered() {
-    let Some(dir) = shared_data() else { return };
+    let Some(dir) = data_dir() else { return };
     let read = |rel: &str| {
         read_exr(
             &std::fs::read(dir.join("exr_files").join(rel)).unwrap(),

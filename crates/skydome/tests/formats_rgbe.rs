@@ -1,6 +1,8 @@
 //! Radiance RGBE `.hdr`: conversion accuracy, round trips, header metadata, foreign files and
 //! hostile input.
 
+mod common;
+use common::data_dir;
 use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
@@ -10,16 +12,6 @@ use skydome::formats::rgbe::{
 };
 use skydome::formats::{HdrMeta, PixelPoint, SunMark};
 use skydome::HdrImage;
-
-fn shared_data() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!("skipping: ../shared/data not found");
-        None
-    }
-}
 
 /// Deterministic xorshift so every run tests the same "noise".
 struct Rng(u64);
@@ -590,7 +582,7 @@ fn image_crate_decode(bytes: &[u8]) -> Option<(u32, u32, Vec<f32>)> {
 
 #[test]
 fn real_hdr_files_match_the_image_crate_decoder() {
-    let Some(dir) = shared_data() else { return };
+    let Some(dir) = data_dir() else { return };
     let files = hdr_files(&dir);
     assert!(
         files.len() >= 14,
@@ -638,7 +630,7 @@ fn real_hdr_files_match_the_image_crate_decoder() {
 
 #[test]
 fn known_properties_of_real_hdr_files_are_recovered() {
-    let Some(dir) = shared_data() else { return };
+    let Some(dir) = data_dir() else { return };
     let read = |rel: &str| {
         let bytes = std::fs::read(dir.join("hdr_files").join(rel)).unwrap();
         decode_rgbe(&bytes, &Limits::default()).unwrap()

@@ -1,6 +1,8 @@
 //! Tone-mapping properties on synthetic images with known answers, and on one real lat-long HDR.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::data_dir;
+use std::path::Path;
 
 use skydome::image::{luminance, Circle, HdrImage};
 use skydome::tonemap::{
@@ -473,16 +475,6 @@ fn absurd_parameters_are_errors_not_panics() {
     assert!(e.to_string().contains("reinhard"));
 }
 
-fn shared_data() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        println!("skipping: ../shared/data not found");
-        None
-    }
-}
-
 fn read_hdr(path: &Path) -> HdrImage {
     let f = std::io::BufReader::new(std::fs::File::open(path).unwrap());
     let dec = image::codecs::hdr::HdrDecoder::new(f).unwrap();
@@ -495,7 +487,7 @@ fn read_hdr(path: &Path) -> HdrImage {
 
 #[test]
 fn real_panorama_default_preview_is_neither_black_nor_blown_out() {
-    let Some(data) = shared_data() else { return };
+    let Some(data) = data_dir() else { return };
     let img = read_hdr(&data.join("hdr_files/banterle_CS_Warwick.hdr"));
     let out = tonemap_u8(&img, &ToneMap::default()).unwrap();
     let lum: Vec<f32> = out
