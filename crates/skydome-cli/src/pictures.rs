@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
+use skydome::formats::picture::{self, PictureFormat};
 use skydome::image::{Circle, RgbImage};
 use skydome::plot;
 use skydome::response::Calibration;
@@ -52,36 +53,17 @@ pub fn preview(path: &Path, img: &HdrImage, tm: &ToneMap, sixteen: bool) -> Resu
 /// Encodes an 8-bit RGB image as JPEG or PNG by the path's extension.
 pub fn encode_rgb8(path: &Path, img: &RgbImage<u8>) -> Result<Vec<u8>> {
     let name = path.display();
-    match crate::io::extension(path).as_str() {
-        "png" => plot::encode_png_rgb8(img).with_context(|| name.to_string()),
-        "jpg" | "jpeg" => {
-            let mut out = Vec::new();
-            let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 92);
-            image::ImageEncoder::write_image(
-                enc,
-                &img.data,
-                img.width as u32,
-                img.height as u32,
-                image::ExtendedColorType::Rgb8,
-            )
-            .with_context(|| format!("{name}: cannot encode JPEG"))?;
-            Ok(out)
-        }
-        e => bail!("{name}: cannot write '.{e}' images; use .jpg or .png"),
-    }
+    let ext = crate::io::extension(path);
+    let Some(format) = PictureFormat::from_extension(&ext) else {
+        bail!("{name}: cannot write '.{ext}' images; use .jpg or .png");
+    };
+    picture::encode_rgb8(img, format).with_context(|| name.to_string())
 }
 
 /// A grey 8-bit PNG of a per-pixel value in 0..=1 (e.g. merge confidence).
 pub fn grey_png(path: &Path, width: usize, height: usize, values: &[f32]) -> Result<Vec<u8>> {
-    let data = values
-        .iter()
-        .flat_map(|v| {
-            let g = (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-            [g, g, g]
-        })
-        .collect();
-    let img = RgbImage::from_vec(width, height, data)
-        .with_context(|| format!("{}: size mismatch", path.display()))?;
+    let img =
+        picture::grey_picture(width, height, values).with_context(|| path.display().to_string())?;
     encode_rgb8(path, &img)
 }
 

@@ -37,6 +37,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, VPos};
 use plotters_backend::{BackendColor, BackendCoord, BackendTextStyle, DrawingErrorKind};
 
+use crate::formats::picture::{self, PictureFormat};
 use crate::image::{luminance, Circle, HdrImage, RgbImage};
 use crate::tonemap::{self, TonemapError};
 
@@ -318,43 +319,14 @@ fn embedded<B: DrawingBackend>(inner: B, raster_text: bool) -> Result<EmbeddedFo
     })
 }
 
-/// Encodes an 8-bit RGB image as PNG bytes.
+/// Encodes an 8-bit RGB image as PNG bytes (see [`crate::formats::picture`]).
 pub fn encode_png_rgb8(img: &RgbImage<u8>) -> Result<Vec<u8>, PlotError> {
-    encode_png(
-        &img.data,
-        img.width,
-        img.height,
-        image::ExtendedColorType::Rgb8,
-    )
+    picture::encode_rgb8(img, PictureFormat::Png).map_err(|e| PlotError::Encode(e.to_string()))
 }
 
-/// Encodes a 16-bit RGB image as PNG bytes.
+/// Encodes a 16-bit RGB image as PNG bytes (see [`crate::formats::picture`]).
 pub fn encode_png_rgb16(img: &RgbImage<u16>) -> Result<Vec<u8>, PlotError> {
-    // The `image` encoder takes native-endian samples and writes PNG's big-endian itself.
-    let bytes: Vec<u8> = img.data.iter().flat_map(|v| v.to_ne_bytes()).collect();
-    encode_png(
-        &bytes,
-        img.width,
-        img.height,
-        image::ExtendedColorType::Rgb16,
-    )
-}
-
-fn encode_png(
-    data: &[u8],
-    w: usize,
-    h: usize,
-    ct: image::ExtendedColorType,
-) -> Result<Vec<u8>, PlotError> {
-    use image::ImageEncoder;
-    let (Ok(w32), Ok(h32)) = (u32::try_from(w), u32::try_from(h)) else {
-        return Err(PlotError::Encode(format!("{w}×{h} is too large for PNG")));
-    };
-    let mut out = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut out)
-        .write_image(data, w32, h32, ct)
-        .map_err(|e| PlotError::Encode(e.to_string()))?;
-    Ok(out)
+    picture::encode_rgb16(img, PictureFormat::Png).map_err(|e| PlotError::Encode(e.to_string()))
 }
 
 /// Draws onto a fresh white RGB bitmap with `f`, then encodes it as PNG.
@@ -372,12 +344,12 @@ where
         f(&root)?;
         root.present().map_err(draw_err)?;
     }
-    encode_png(
-        &buf,
-        size.0 as usize,
-        size.1 as usize,
-        image::ExtendedColorType::Rgb8,
-    )
+    let img = RgbImage {
+        width: size.0 as usize,
+        height: size.1 as usize,
+        data: buf,
+    };
+    encode_png_rgb8(&img)
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -4,8 +4,10 @@
 //! - [`rgbe`]: Radiance RGBE `.hdr` (reader: flat, old-style and new-style RLE, `#?RADIANCE`
 //!   and `#?RGBE`; writer: new-style RLE with skydome's header lines).
 //! - [`exr`]: OpenEXR RGB half/float with the same metadata as string attributes.
+//! - [`picture`]: 8-bit JPEG/PNG and 16-bit PNG display pictures (previews, overlays, maps).
 
 pub mod exr;
+pub mod picture;
 pub mod rgbe;
 
 /// A pixel position in an output image (origin top-left, `x` right, `y` down, pixel centres at
