@@ -309,3 +309,41 @@ fn reading_sniffs_the_signature_and_applies_exposure() {
         Err(RadianceError::Unrecognised)
     ));
 }
+
+#[test]
+fn pixel_point_has_one_text_form() {
+    use skydome::image::PixelPoint;
+    let p: PixelPoint = "-Y 20.5 +X 10.25".parse().expect("point");
+    assert_eq!(p, PixelPoint { x: 10.25, y: 20.5 });
+    assert_eq!(p.to_string(), "-Y 20.5 +X 10.25");
+    let tiny = PixelPoint { x: 1e-9, y: 3.0 };
+    assert_eq!(tiny.to_string().parse::<PixelPoint>(), Ok(tiny));
+    for bad in [
+        "",
+        "-Y 1",
+        "+X 1 -Y 2",
+        "-Y a +X 1",
+        "-Y NaN +X 1",
+        "-Y 1 +X inf",
+    ] {
+        assert!(bad.parse::<PixelPoint>().is_err(), "{bad}");
+    }
+}
+
+#[test]
+fn images_are_checked_against_their_size() {
+    use skydome::image::RgbImage;
+    assert!(RgbImage::try_from_vec(2, 2, vec![0u8; 12]).is_ok());
+    let e = RgbImage::try_from_vec(2, 2, vec![0u8; 11]).unwrap_err();
+    assert_eq!((e.expected, e.got), (12, 11));
+    let broken = RgbImage {
+        width: 3,
+        height: 1,
+        data: vec![0u8; 3],
+    };
+    assert!(broken.validate().is_err());
+    assert!(matches!(
+        fisheye::detect_circle(&broken),
+        Err(fisheye::FisheyeError::BufferSize(_))
+    ));
+}
