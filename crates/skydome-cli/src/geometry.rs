@@ -61,6 +61,10 @@ pub struct GeometryArgs {
     /// Lower hemisphere of the equirectangular map: black, mirror, or a constant R,G,B radiance.
     #[arg(long, default_value = "black", value_parser = parse_ground)]
     pub ground: Ground,
+    /// Also write the 180° dome as Radiance's angular fish-eye (`VIEW= -vta`, north up, east
+    /// left), whatever the lens's projection: the dome Radiance's tools (evalglare) read.
+    #[arg(long, value_name = "FILE")]
+    pub angular: Option<PathBuf>,
     /// Also write a preview with the circles, north (blue) and sun (yellow) drawn on it (.png/.jpg).
     #[arg(long, value_name = "FILE")]
     pub overlay: Option<PathBuf>,
@@ -126,10 +130,14 @@ impl GeometryArgs {
 
     /// Output paths this part writes.
     pub fn outputs(&self) -> Vec<&PathBuf> {
-        [self.equirect.as_ref(), self.overlay.as_ref()]
-            .into_iter()
-            .flatten()
-            .collect()
+        [
+            self.equirect.as_ref(),
+            self.angular.as_ref(),
+            self.overlay.as_ref(),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
     }
 
     /// The lens source: a profile file, circle detection (or the given `circle`), or none.
@@ -168,6 +176,7 @@ impl GeometryArgs {
     pub fn products(&self, products: Products) -> Products {
         Products {
             overlay: self.overlay.is_some(),
+            angular: self.angular.is_some(),
             equirect: self.equirect.as_ref().map(|_| EquirectOptions {
                 width: self.equirect_width,
                 ground: self.ground,

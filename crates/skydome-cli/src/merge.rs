@@ -143,8 +143,14 @@ fn encode(a: &Args, dome: &Dome) -> Result<Outputs> {
     if let Some(p) = &a.exr {
         out.add(p, radiance(p, &dome.radiance, &dome.meta)?);
     }
-    if let (Some(p), Some((img, meta))) = (&a.geometry.equirect, &dome.equirect) {
-        out.add(p, radiance(p, img, meta)?);
+    let maps = [
+        (&a.geometry.equirect, &dome.equirect),
+        (&a.geometry.angular, &dome.angular),
+    ];
+    for (path, map) in maps {
+        if let (Some(p), Some((img, meta))) = (path, map) {
+            out.add(p, radiance(p, img, meta)?);
+        }
     }
     let pictures = [
         (&a.preview, &dome.preview),

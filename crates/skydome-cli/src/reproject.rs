@@ -3,7 +3,8 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use skydome::fisheye::{self, LensKind, LensProfile};
+use skydome::fisheye::{LensKind, LensProfile};
+use skydome::formats::HdrMeta;
 use skydome::pipeline;
 use skydome::reproject::{self, Ground, MapProjection, ReprojectOptions};
 use skydome::sky::{DevicePose, ImageOrientation, SkyGeometry};
@@ -83,10 +84,10 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     .with_context(|| a.input.display().to_string())?;
     spin.finish_and_clear();
     let e_in = reproject::horizontal_irradiance_fisheye(&r.image, &geom);
-    let mut meta = pipeline::equirect_meta(&r.meta);
-    if let MapProjection::Fisheye { model, fov_deg, .. } = target {
-        meta.view = fisheye::radiance_view(model, fov_deg);
-    }
+    let meta = HdrMeta {
+        view: target.radiance_view(),
+        ..pipeline::equirect_meta(&r.meta)
+    };
     let mut out = Outputs::default();
     out.add(
         &a.output,

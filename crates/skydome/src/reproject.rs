@@ -244,6 +244,19 @@ impl MapProjection {
         })
     }
 
+    /// Radiance's `VIEW=` options for a fish-eye map (see
+    /// [`SkyGeometry::radiance_view`]): e.g. `-vta -vp 0 0 0 -vd 0 0 1 -vu 0 1 0 -vh 180 -vv 180`
+    /// for the upward equidistant dome, north at the top. `None` for other maps and for
+    /// projections Radiance has no view type for.
+    pub fn radiance_view(&self) -> Option<String> {
+        match (self, self.mapper().ok()?) {
+            (MapProjection::Fisheye { size, .. }, Mapper::Fisheye(g)) => {
+                g.radiance_view(0.5 * *size as f64)
+            }
+            _ => None,
+        }
+    }
+
     /// The ENU unit vector seen at continuous output position `(x, y)` (pixel centres at `+0.5`);
     /// `None` outside the map's disc.
     pub fn pixel_to_vector(&self, x: f64, y: f64) -> Result<Option<[f64; 3]>, ReprojectError> {

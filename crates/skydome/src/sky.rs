@@ -411,6 +411,56 @@ impl SkyGeometry {
         self.pixel_to_vector(p.x, p.y).map(Direction::from_vector)
     }
 
+    /// Radiance's view options (`VIEW=`) for a square image centred on the optical axis that
+    /// extends `half_extent_px` pixels from the centre to each edge, in this lens's projection:
+    /// the view type (`-vta` equidistant, `-vts` stereographic, `-vth` orthographic), the
+    /// view direction `-vd` (the optical axis, `0 0 1` for an upward view) and up vector `-vu`
+    /// (the world direction of the image's top edge: `0 1 0` when north is at the top) in
+    /// Radiance's usual world frame (`+X` east, `+Y` north, `+Z` up — the frame of `gensky` and
+    /// `gendaylit`), and `-vh`/`-vv` the angle the image spans edge to edge. `None` when Radiance
+    /// has no view type for the projection (equisolid, polynomial: write the angular map
+    /// instead), or when the stored image is mirrored (a Radiance view never is).
+    pub fn radiance_view(&self, half_extent_px: f64) -> Option<String> {
+        use crate::fisheye::LensKind;
+        let kind = self.projection.kind();
+        let t = match kind {
+            LensKind::Equidistant => "a",
+            LensKind::Stereographic => "s",
+            LensKind::Orthographic => "h",
+            LensKind::Equisolid | LensKind::Polynomial => return None,
+        };
+        let fov = match self.projection.theta(half_extent_px) {
+            Some(theta) => 2.0 * theta.to_degrees(),
+            // A hemispherical view holds at most 180°; the image is at most a pixel wider.
+            None if kind == LensKind::Orthographic => 180.0,
+            None => return None,
+        };
+        let world = |sx: f64, sy: f64| -> [f64; 3] {
+            let m = &self.to_disp;
+            let (dx, dy) = (m[0][0] * sx + m[0][1] * sy, m[1][0] * sx + m[1][1] * sy);
+            let mut v = [0.0; 3];
+            for (i, vi) in v.iter_mut().enumerate() {
+                *vi = dx * self.right[i] + dy * self.down[i];
+            }
+            v
+        };
+        let (vd, vu, right) = (self.axis, world(0.0, -1.0), world(1.0, 0.0));
+        if dot(cross(vd, vu), right) < 0.5 {
+            return None;
+        }
+        let n = |x: f64| {
+            let r = (x * 1e6).round() / 1e6;
+            crate::image::fmt_num(if r == 0.0 { 0.0 } else { r })
+        };
+        let v3 = |v: [f64; 3]| format!("{} {} {}", n(v[0]), n(v[1]), n(v[2]));
+        let fov = n(fov);
+        Some(format!(
+            "-vt{t} -vp 0 0 0 -vd {} -vu {} -vh {fov} -vv {fov}",
+            v3(vd),
+            v3(vu)
+        ))
+    }
+
     /// The north point: where true north meets the horizon (for `#NORTH=`), stored pixels.
     pub fn north_point(&self) -> PixelPoint {
         self.compass_point(0.0)
@@ -433,6 +483,17 @@ impl SkyGeometry {
                 }
             })
     }
+}
+
+/// Radiance's luminous efficacy of its RGB "watts", lm/W: its tools (`pvalue -o`, `evalglare`,
+/// `falsecolor`) take luminance = 179 × (0.265 R + 0.670 G + 0.065 B).
+pub const RADIANCE_EFFICACY: f64 = 179.0;
+
+/// Luminance (or illuminance, from irradiance) of a linear RGB radiance the way Radiance's tools
+/// compute it: `179 × (0.265 R + 0.670 G + 0.065 B)`; cd/m² (or lux) when the radiance is in
+/// Radiance's W·sr⁻¹·m⁻², in relative units otherwise.
+pub fn radiance_luminance(rgb: [f64; 3]) -> f64 {
+    RADIANCE_EFFICACY * (0.265 * rgb[0] + 0.670 * rgb[1] + 0.065 * rgb[2])
 }
 
 /// A detected sun.

@@ -224,23 +224,52 @@ fn one_photo_needs_no_exposure_time_for_circle_detection() {
 }
 
 #[test]
-fn radiance_view_names_only_what_radiance_can_read() {
-    let v = |k, fov| fisheye::radiance_view(k, fov);
+fn radiance_view_has_the_upward_direction_and_the_image_top() {
+    use skydome::fisheye::LensProfile;
+    use skydome::image::Circle;
+    use skydome::sky::{DevicePose, ImageOrientation, SkyGeometry};
+    let c = Circle {
+        cx: 100.0,
+        cy: 100.0,
+        r: 100.0,
+    };
+    let view = |kind, north, o| {
+        let lens = LensProfile::from_fov(c, 180.0, kind).expect("lens");
+        SkyGeometry::new(&lens, north, DevicePose::ScreenDown, o)
+            .expect("geometry")
+            .radiance_view(100.0)
+    };
+    let n = ImageOrientation::Normal;
     assert_eq!(
-        v(LensKind::Equidistant, 180.0).as_deref(),
-        Some("-vta -vh 180 -vv 180")
+        view(LensKind::Equidistant, 0.0, n).as_deref(),
+        Some("-vta -vp 0 0 0 -vd 0 0 1 -vu 0 1 0 -vh 180 -vv 180")
     );
     assert_eq!(
-        v(LensKind::Stereographic, 180.0).as_deref(),
-        Some("-vts -vh 180 -vv 180")
+        view(LensKind::Stereographic, 0.0, n).as_deref(),
+        Some("-vts -vp 0 0 0 -vd 0 0 1 -vu 0 1 0 -vh 180 -vv 180")
     );
+    // The phone's top edge pointing east puts east at the image top.
     assert_eq!(
-        v(LensKind::Orthographic, 180.0).as_deref(),
-        Some("-vth -vh 180 -vv 180")
+        view(LensKind::Equidistant, 90.0, n).as_deref(),
+        Some("-vta -vp 0 0 0 -vd 0 0 1 -vu 1 0 0 -vh 180 -vv 180")
     );
-    assert_eq!(v(LensKind::Equisolid, 180.0), None);
-    assert_eq!(v(LensKind::Polynomial, 180.0), None);
-    assert_eq!(v(LensKind::Equidistant, 170.0), None);
+    assert!(view(LensKind::Orthographic, 0.0, n).is_some_and(|v| v.starts_with("-vth ")));
+    // No Radiance view type for equisolid; a mirrored image is no Radiance view.
+    assert_eq!(view(LensKind::Equisolid, 0.0, n), None);
+    assert_eq!(
+        view(
+            LensKind::Equidistant,
+            0.0,
+            ImageOrientation::MirrorHorizontal
+        ),
+        None
+    );
+    // An image wider than the horizon spans more than 180°.
+    let lens = LensProfile::from_fov(c, 180.0, LensKind::Equidistant).expect("lens");
+    let g = SkyGeometry::new(&lens, 0.0, DevicePose::ScreenDown, n).expect("geometry");
+    assert!(g
+        .radiance_view(101.0)
+        .is_some_and(|v| v.ends_with("-vh 181.8 -vv 181.8")));
 }
 
 #[test]

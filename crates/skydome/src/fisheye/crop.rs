@@ -1,25 +1,7 @@
-//! Cropping a fish-eye image to the dome `θ ≤ fov/2`, and the Radiance view of such a dome.
+//! Cropping a fish-eye image to the dome `θ ≤ fov/2`.
 
-use super::{check_fov, FisheyeError, LensKind, LensProfile};
+use super::{check_fov, FisheyeError, LensProfile};
 use crate::image::{Circle, HdrImage};
-
-/// Radiance's `VIEW=` options for a dome of `fov_deg` in the lens's own projection, when
-/// Radiance has that view type: equidistant `-vta`, stereographic `-vts`, orthographic `-vth`
-/// (hemispherical), each with `-vh`/`-vv` the field of view. `None` for projections Radiance
-/// cannot describe (equisolid, polynomial) and for a field of view other than 180°, where the
-/// dome is not a full hemisphere view.
-pub fn radiance_view(kind: LensKind, fov_deg: f64) -> Option<String> {
-    if (fov_deg - 180.0).abs() >= 1e-9 {
-        return None;
-    }
-    let t = match kind {
-        LensKind::Equidistant => "a",
-        LensKind::Stereographic => "s",
-        LensKind::Orthographic => "h",
-        _ => return None,
-    };
-    Some(format!("-vt{t} -vh 180 -vv 180"))
-}
 
 /// The result of [`crop_dome`].
 #[derive(Debug, Clone, PartialEq)]

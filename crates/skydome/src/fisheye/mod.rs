@@ -59,7 +59,7 @@ mod fit;
 mod projection;
 
 pub use circle::{detect_circle, detect_circle_luma, CircleFit};
-pub use crop::{crop_dome, radiance_view, DomeCrop};
+pub use crop::{crop_dome, DomeCrop};
 pub use fit::{fit_projection, parse_angle_radius_csv, AngleRadius, LensFit, ModelFit};
 pub use projection::{LensKind, Projection};
 // The lens-profile JSON format lives with the other formats; re-exported here, where users

@@ -255,6 +255,9 @@ pub struct Products {
     pub confidence: bool,
     /// The equirectangular map (needs a lens).
     pub equirect: Option<EquirectOptions>,
+    /// The 180° dome as Radiance's angular fish-eye (`-vta`, north up), whatever the lens's
+    /// projection, for Radiance's tools (needs a lens).
+    pub angular: bool,
 }
 
 /// Everything [`run`] is told besides the frames. Serialisable, so a web page can pass it as
@@ -372,6 +375,8 @@ pub struct Dome {
     pub meta: HdrMeta,
     /// The equirectangular map and its metadata, when asked.
     pub equirect: Option<(HdrImage, HdrMeta)>,
+    /// The angular (`-vta`) dome and its metadata (with `VIEW=`), when asked.
+    pub angular: Option<(HdrImage, HdrMeta)>,
     /// The tone-mapped preview, when asked.
     pub preview: Option<RgbImage<u8>>,
     /// The overlay picture, when asked.
@@ -459,7 +464,7 @@ pub fn run(
         ..HdrMeta::default()
     };
     let mut radiance = merged.radiance;
-    let (mut geometry, mut equirect, mut marks) = (None, None, None);
+    let (mut geometry, mut equirect, mut angular, mut marks) = (None, None, None, None);
     let lens_profile = lens.as_ref().map(|(l, _)| l.clone());
     if let Some(lens) = lens {
         p.at(Stage::Sky, 0.0)?;
@@ -469,6 +474,14 @@ pub fn run(
         meta.north = g.meta.north;
         meta.view = g.meta.view;
         equirect = g.equirect.map(|e| (e, equirect_meta(&meta)));
+        angular = g.angular.map(|(img, m)| {
+            let m = HdrMeta {
+                capdate: meta.capdate.clone(),
+                gmt: meta.gmt.clone(),
+                ..m
+            };
+            (img, m)
+        });
         marks = Some(g.marks);
         warnings.extend(g.warnings);
         geometry = Some(g.report);
@@ -506,6 +519,7 @@ pub fn run(
         radiance,
         meta,
         equirect,
+        angular,
         preview,
         overlay,
         confidence,
@@ -563,6 +577,7 @@ fn check_options(o: &Options) -> Result<(), PipelineError> {
         (s.north_deg.is_some(), "north"),
         (o.products.equirect.is_some(), "the equirectangular map"),
         (o.products.overlay, "the overlay"),
+        (o.products.angular, "the angular dome"),
         (
             matches!(s.sun, SunMode::Tap(_) | SunMode::Ephemeris),
             "a sun position",

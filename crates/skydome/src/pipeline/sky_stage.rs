@@ -62,6 +62,10 @@ pub struct GeometryReport {
     pub sun_ephemeris: Option<Direction>,
     /// Agreement between the detected (or tapped) and the computed sun.
     pub sun_cross_check: Option<SunCrossCheck>,
+    /// Horizontal illuminance of the dome (θ ≤ 90°, cosine-weighted), Radiance's way
+    /// ([`sky::radiance_luminance`] of the horizontal irradiance): lux when the radiance is
+    /// absolute, relative units otherwise. What `evalglare -V` reports for the upward dome.
+    pub horizontal_illuminance: f64,
 }
 
 /// The sky stage's results.
@@ -69,6 +73,7 @@ pub(super) struct SkyResult {
     pub image: HdrImage,
     pub meta: HdrMeta,
     pub equirect: Option<HdrImage>,
+    pub angular: Option<(HdrImage, HdrMeta)>,
     pub marks: OverlayMarks,
     pub report: GeometryReport,
     pub warnings: Vec<String>,
@@ -129,9 +134,10 @@ pub(super) fn apply(
         azimuth_deg: sun_dir.filter(|_| azimuth_known).map(|d| d.azimuth_deg),
         elevation_deg: sun_dir.map(|d| d.elevation_deg),
     });
+    // Only a crop is square and centred on the optical axis, as a Radiance view must be.
     let view = s
         .crop
-        .then(|| fisheye::radiance_view(lens.projection.kind(), s.fov_out_deg))
+        .then(|| f.geom.radiance_view(0.5 * f.image.width as f64))
         .flatten();
     let equirect = match &o.products.equirect {
         Some(e) => Some(reproject::reproject(
@@ -148,6 +154,10 @@ pub(super) fn apply(
         )?),
         None => None,
     };
+    let angular = match o.products.angular {
+        true => Some(angular_map(&f, horizon.r, sun_dir, s.north_deg.is_some())?),
+        false => None,
+    };
     let visible = Circle {
         cx: lens.circle.cx - f.offset.0,
         cy: lens.circle.cy - f.offset.1,
@@ -161,6 +171,7 @@ pub(super) fn apply(
             ..HdrMeta::default()
         },
         equirect,
+        angular,
         marks: OverlayMarks {
             visible: Some(visible),
             horizon: Some(horizon),
@@ -178,6 +189,9 @@ pub(super) fn apply(
             sun_confidence: confidence,
             sun_ephemeris: ephemeris,
             sun_cross_check: cross,
+            horizontal_illuminance: sky::radiance_luminance(
+                reproject::horizontal_irradiance_fisheye(&f.image, &f.geom),
+            ),
         },
         image: f.image,
         warnings,
@@ -265,4 +279,39 @@ fn find_sun(
             None => (None, None, None),
         },
     }
+}
+
+/// The upward 180° dome as Radiance's angular fish-eye (`-vta`), whatever the lens's own
+/// projection: north at the top, east on the left, the horizon inscribed in a square of the
+/// horizon's diameter; with `VIEW=`, and the sun (and north, when known) marked in its pixels.
+fn angular_map(
+    f: &Framed,
+    horizon_r: f64,
+    sun: Option<Direction>,
+    north_known: bool,
+) -> Result<(HdrImage, HdrMeta), PipelineError> {
+    let size = (2.0 * horizon_r.ceil()).clamp(16.0, 32768.0) as usize;
+    let target = MapProjection::Fisheye {
+        size,
+        model: crate::fisheye::LensKind::Equidistant,
+        fov_deg: 180.0,
+    };
+    let image = reproject::reproject(&f.image, &f.geom, &target, &ReprojectOptions::default())?;
+    let at = |d: &Direction| -> Option<PixelPoint> {
+        let (x, y) = target.vector_to_pixel(d.to_vector()).ok()??;
+        Some(PixelPoint { x, y })
+    };
+    let meta = HdrMeta {
+        view: target.radiance_view(),
+        sun: sun.and_then(|d| {
+            Some(SunMark {
+                pixel: at(&d)?,
+                azimuth_deg: north_known.then_some(d.azimuth_deg),
+                elevation_deg: Some(d.elevation_deg),
+            })
+        }),
+        north: north_known.then(|| at(&Direction::new(0.0, 0.0))).flatten(),
+        ..HdrMeta::default()
+    };
+    Ok((image, meta))
 }
