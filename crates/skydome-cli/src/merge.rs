@@ -4,6 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use serde::Serialize;
+use skydome::image::PixelPoint;
+use skydome::photometry::{Reference, SpotLuminance};
 use skydome::pipeline::{self, Dome, Options, Products, Report, ResponseSource};
 use skydome::response::{CameraProfile, Weighting};
 
@@ -37,6 +39,17 @@ pub struct Args {
     /// Frame weighting: `hat` (robust, default) or `none` (the seed's unweighted eq. 4).
     #[arg(long, default_value = "hat", value_parser = parse_weighting)]
     pub weighting: Weighting,
+    /// A spot-meter reading that makes the radiance absolute: the luminance in cd/m² of the
+    /// patch around pixel X,Y of the input photos (origin top-left).
+    #[arg(long, value_name = "X,Y=CD", value_parser = parse_spot)]
+    pub luminance: Option<(f64, f64, f64)>,
+    /// Radius in pixels of the patch --luminance averages.
+    #[arg(long, default_value_t = 3.0, value_name = "PX")]
+    pub luminance_radius: f64,
+    /// Horizontal illuminance in lux measured beside the camera: makes the radiance absolute
+    /// (with --luminance too, the disagreement is reported). Needs a fish-eye lens.
+    #[arg(long, value_name = "LUX")]
+    pub illuminance: Option<f64>,
     #[command(flatten)]
     pub bracket: BracketArgs,
     #[command(flatten)]
@@ -54,6 +67,15 @@ pub struct Args {
 /// Parses a merge weighting name.
 fn parse_weighting(s: &str) -> Result<Weighting, String> {
     s.parse().map_err(|e: skydome::UnknownName| e.to_string())
+}
+
+/// Parses `X,Y=CD`.
+fn parse_spot(s: &str) -> Result<(f64, f64, f64), String> {
+    let bad = || format!("'{s}': expected X,Y=CD (pixel, then luminance in cd/m²)");
+    let (xy, cd) = s.split_once('=').ok_or_else(bad)?;
+    let (x, y) = xy.split_once(',').ok_or_else(bad)?;
+    let num = |t: &str| t.trim().parse::<f64>().map_err(|_| bad());
+    Ok((num(x)?, num(y)?, num(cd)?))
 }
 
 /// The `--json` output: the library's report and the files written.
@@ -121,6 +143,14 @@ fn options(a: &Args) -> Result<Options> {
             confidence: a.confidence.is_some(),
             ..Products::default()
         }),
+        reference: Reference {
+            luminance: a.luminance.map(|(x, y, cd)| SpotLuminance {
+                pixel: PixelPoint { x, y },
+                radius_px: a.luminance_radius,
+                cd_per_m2: cd,
+            }),
+            illuminance_lux: a.illuminance,
+        },
     })
 }
 
@@ -203,6 +233,19 @@ fn print_summary(r: &Report, written: &[String]) {
         if let Some(n) = g.north {
             crate::out(&format!("north point at ({:.1}, {:.1})", n.x, n.y));
         }
+    }
+    if let Some(p) = &r.photometry {
+        let mut s = format!(
+            "absolute: scaled by {:.6e} from the {} reading",
+            p.scale, p.from
+        );
+        if let Some(e) = p.horizontal_illuminance_lux {
+            s += &format!("; horizontal illuminance {e:.0} lx");
+        }
+        if let Some(d) = p.disagreement_percent {
+            s += &format!("; the illuminance reading disagrees by {d:+.1} %");
+        }
+        crate::out(&s);
     }
     for w in written {
         crate::out(&format!("wrote {w}"));

@@ -53,6 +53,7 @@ pub mod formats;
 pub mod image;
 pub mod merge;
 pub mod overlay;
+pub mod photometry;
 pub mod pipeline;
 pub mod plot;
 pub mod render;

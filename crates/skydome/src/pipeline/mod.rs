@@ -82,6 +82,9 @@ pub enum PipelineError {
     /// The equirectangular map failed.
     #[error("equirectangular map: {0}")]
     Reproject(#[from] ReprojectError),
+    /// The absolute calibration failed.
+    #[error("{0}")]
+    Photometry(#[from] crate::photometry::PhotometryError),
     /// Tone mapping a picture failed.
     #[error("{0}")]
     Tonemap(#[from] TonemapError),
@@ -277,6 +280,8 @@ pub struct Options {
     pub sky: SkyOptions,
     /// Products besides the radiance map.
     pub products: Products,
+    /// Measurements that make the radiance absolute (see [`crate::photometry`]).
+    pub reference: crate::photometry::Reference,
 }
 
 /// A stage of [`run`], in order.
@@ -362,6 +367,8 @@ pub struct Report {
     pub meta: HdrMeta,
     /// The fish-eye results, with a lens.
     pub geometry: Option<GeometryReport>,
+    /// The absolute calibration, when a measurement was given.
+    pub photometry: Option<crate::photometry::PhotometryReport>,
     /// Warnings, in neutral words, one sentence each.
     pub warnings: Vec<String>,
 }
@@ -464,6 +471,15 @@ pub fn run(
         ..HdrMeta::default()
     };
     let mut radiance = merged.radiance;
+    let photometry = calibrate_absolute(options, &br, lens.as_ref().map(|l| &l.0), &mut radiance)?;
+    if let Some(p) = &photometry {
+        meta.other.push(absolute_header_line(p));
+        if let Some(d) = p.disagreement_percent.filter(|d| d.abs() > 10.0) {
+            warnings.push(format!(
+                "the dome's horizontal illuminance is {d:+.0} % off the illuminance reading (after the luminance reading's scale): a clipped sun, vignetting or a meter that saw a different sky"
+            ));
+        }
+    }
     let (mut geometry, mut equirect, mut angular, mut marks) = (None, None, None, None);
     let lens_profile = lens.as_ref().map(|(l, _)| l.clone());
     if let Some(lens) = lens {
@@ -476,9 +492,10 @@ pub fn run(
         equirect = g.equirect.map(|e| (e, equirect_meta(&meta)));
         angular = g.angular.map(|(img, m)| {
             let m = HdrMeta {
-                capdate: meta.capdate.clone(),
-                gmt: meta.gmt.clone(),
-                ..m
+                view: m.view,
+                sun: m.sun,
+                north: m.north,
+                ..equirect_meta(&meta)
             };
             (img, m)
         });
@@ -513,6 +530,7 @@ pub fn run(
         clipped_low_pixels: merged.clipped_low,
         meta: meta.clone(),
         geometry,
+        photometry,
         warnings,
     };
     Ok(Dome {
@@ -537,12 +555,15 @@ pub fn default_tonemap(circle: Option<Circle>) -> ToneMap {
     }
 }
 
-/// The metadata an equirectangular map inherits from its dome: the capture times only (the
-/// dome's pixel positions of sun and north, and its fish-eye `VIEW=`, do not apply to it).
+/// The metadata a map reprojected from a dome inherits: what describes the pixel values (the
+/// capture times, `EXPOSURE=`, the units line of an absolute dome), not the dome's geometry
+/// (its pixel positions of sun and north, its fish-eye `VIEW=`).
 pub fn equirect_meta(dome: &HdrMeta) -> HdrMeta {
     HdrMeta {
         capdate: dome.capdate.clone(),
         gmt: dome.gmt.clone(),
+        exposure: dome.exposure,
+        other: dome.other.clone(),
         ..HdrMeta::default()
     }
 }
@@ -566,6 +587,50 @@ fn frame_summary(f: &bracket::Frame) -> FrameSummary {
     }
 }
 
+/// Scales `radiance` to Radiance's absolute units when a measurement is given.
+fn calibrate_absolute(
+    o: &Options,
+    br: &Bracket,
+    lens: Option<&LensProfile>,
+    radiance: &mut HdrImage,
+) -> Result<Option<crate::photometry::PhotometryReport>, PipelineError> {
+    use crate::photometry;
+    let r = &o.reference;
+    if r.is_empty() {
+        return Ok(None);
+    }
+    let patch = match &r.luminance {
+        Some(s) => Some(photometry::patch_luminance(radiance, s)?),
+        None => None,
+    };
+    let illuminance = match (r.illuminance_lux, lens) {
+        (Some(_), Some(lens)) => {
+            let g = sky_stage::full_geometry(o, br, lens)?;
+            Some(crate::sky::radiance_luminance(
+                crate::reproject::horizontal_irradiance_fisheye(radiance, &g),
+            ))
+        }
+        _ => None,
+    };
+    let rep = photometry::absolute_scale(r, patch, illuminance)?;
+    let k = rep.scale as f32;
+    radiance.data.iter_mut().for_each(|v| *v *= k);
+    Ok(Some(rep))
+}
+
+/// The header comment that states the units of an absolute dome.
+fn absolute_header_line(p: &crate::photometry::PhotometryReport) -> String {
+    let mut s = format!(
+        "#UNITS= absolute: Radiance W/sr/m2, luminance = 179*(0.265 R + 0.670 G + 0.065 B) cd/m2; scaled by {} from the {} reading",
+        crate::image::fmt_num(p.scale),
+        p.from
+    );
+    if let Some(d) = p.disagreement_percent {
+        s += &format!(" (illuminance reading disagrees by {d:+.1} %)");
+    }
+    s
+}
+
 /// Refuses sky options and products that need a lens when there is none.
 fn check_options(o: &Options) -> Result<(), PipelineError> {
     if o.lens != LensSource::None {
@@ -578,6 +643,10 @@ fn check_options(o: &Options) -> Result<(), PipelineError> {
         (o.products.equirect.is_some(), "the equirectangular map"),
         (o.products.overlay, "the overlay"),
         (o.products.angular, "the angular dome"),
+        (
+            o.reference.illuminance_lux.is_some(),
+            "an illuminance reading",
+        ),
         (
             matches!(s.sun, SunMode::Tap(_) | SunMode::Ephemeris),
             "a sun position",

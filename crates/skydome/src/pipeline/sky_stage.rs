@@ -106,8 +106,7 @@ pub(super) fn apply(
     radiance: HdrImage,
 ) -> Result<SkyResult, PipelineError> {
     let s = &o.sky;
-    let orient = ImageOrientation::from_exif(br.pixel_orientation)?;
-    let full = SkyGeometry::new(&lens, s.north_deg.unwrap_or(0.0), s.pose, orient)?;
+    let full = full_geometry(o, br, &lens)?;
     let f = frame(radiance, &lens, full, s.crop.then_some(s.fov_out_deg))?;
     let horizon = f.geom.horizon_circle();
     let north = s.north_deg.map(|_| f.geom.north_point());
@@ -196,6 +195,22 @@ pub(super) fn apply(
         image: f.image,
         warnings,
     })
+}
+
+/// The geometry of the merged (uncropped) photo: the lens, north (0 when unknown), the pose and
+/// the EXIF orientation still in force on the pixels.
+pub(super) fn full_geometry(
+    o: &Options,
+    br: &Bracket,
+    lens: &LensProfile,
+) -> Result<SkyGeometry, PipelineError> {
+    let orient = ImageOrientation::from_exif(br.pixel_orientation)?;
+    Ok(SkyGeometry::new(
+        lens,
+        o.sky.north_deg.unwrap_or(0.0),
+        o.sky.pose,
+        orient,
+    )?)
 }
 
 /// Crops to the dome of `crop_fov_deg` when given, moving the geometry's centre with it.
