@@ -141,7 +141,7 @@ pub fn absolute_scale(
     let from_lum = match (reference.luminance, patch) {
         (Some(s), Some(p)) => {
             let cd = positive("luminance (cd/m²)", s.cd_per_m2)?;
-            if !(p > 0.0) {
+            if !(p.is_finite() && p > 0.0) {
                 return Err(PhotometryError::Black {
                     what: "metered patch",
                 });
@@ -153,7 +153,7 @@ pub fn absolute_scale(
     let from_ill = match (reference.illuminance_lux, illuminance) {
         (Some(lux), Some(e)) => {
             let lux = positive("illuminance (lux)", lux)?;
-            if !(e > 0.0) {
+            if !(e.is_finite() && e > 0.0) {
                 return Err(PhotometryError::Black { what: "dome" });
             }
             Some(lux / e)
