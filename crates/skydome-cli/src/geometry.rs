@@ -33,9 +33,13 @@ pub struct GeometryArgs {
     /// Field of view kept by --crop, degrees.
     #[arg(long, default_value_t = 180.0)]
     pub fov_out: f64,
-    /// Compass azimuth of the phone's top edge, degrees from true north towards east.
+    /// Compass azimuth of the phone's top edge, degrees from true north towards east; or
+    /// `from-sun`: set it from the observed sun and the ephemeris (needs time and place).
+    #[arg(long, allow_hyphen_values = true, value_name = "DEG|from-sun", value_parser = parse_north)]
+    pub north: Option<North>,
+    /// With --north from-sun: the compass's reading, reported against the sun's north.
     #[arg(long, allow_hyphen_values = true, value_name = "DEG")]
-    pub north: Option<f64>,
+    pub compass: Option<f64>,
     /// How the phone lay: screen-down (rear camera looks up, the usual) or screen-up.
     #[arg(long, default_value = "screen-down", value_parser = parse_pose)]
     pub device_pose: DevicePose,
@@ -68,6 +72,25 @@ pub struct GeometryArgs {
     /// Also write a preview with the circles, north (blue) and sun (yellow) drawn on it (.png/.jpg).
     #[arg(long, value_name = "FILE")]
     pub overlay: Option<PathBuf>,
+}
+
+/// `--north`: a compass azimuth or `from-sun`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum North {
+    /// Degrees from true north towards east.
+    Deg(f64),
+    /// From the sun and the ephemeris.
+    FromSun,
+}
+
+fn parse_north(s: &str) -> Result<North, String> {
+    match s {
+        "from-sun" => Ok(North::FromSun),
+        _ => match s.trim().parse::<f64>() {
+            Ok(d) if d.is_finite() => Ok(North::Deg(d)),
+            _ => Err(format!("'{s}': expected degrees (e.g. 37) or from-sun")),
+        },
+    }
 }
 
 /// Parses `screen-down` or `screen-up`.
@@ -158,7 +181,12 @@ impl GeometryArgs {
         SkyOptions {
             crop: self.crop,
             fov_out_deg: self.fov_out,
-            north_deg: self.north,
+            north_deg: match self.north {
+                Some(North::Deg(d)) => Some(d),
+                Some(North::FromSun) => self.compass,
+                None => None,
+            },
+            north_from_sun: self.north == Some(North::FromSun),
             pose: self.device_pose,
             // Without a lens there is no sky geometry; `auto` then simply finds nothing.
             sun: if self.enabled() {

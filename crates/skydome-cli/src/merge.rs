@@ -233,6 +233,15 @@ fn print_summary(r: &Report, written: &[String]) {
         if let Some(n) = g.north {
             crate::out(&format!("north point at ({:.1}, {:.1})", n.x, n.y));
         }
+        if let Some(f) = g.north_from_sun {
+            crate::out(&format!(
+                "north from the sun: the phone's top edge pointed at {:.2}°{}",
+                f.north_deg,
+                f.compass_error_deg.map_or(String::new(), |e| format!(
+                    " (the compass was off by {e:+.2}°)"
+                ))
+            ));
+        }
     }
     if let Some(p) = &r.photometry {
         let mut s = format!(

@@ -376,3 +376,65 @@ fn images_are_checked_against_their_size() {
         Err(fisheye::FisheyeError::BufferSize(_))
     ));
 }
+
+#[test]
+fn north_from_the_sun_does_not_depend_on_the_compass() {
+    use skydome::pipeline::SunMode;
+    let run = |compass: Option<f64>| {
+        let o = Options {
+            lens: LensSource::Detect {
+                model: LensKind::Equidistant,
+                fov_deg: 235.0,
+                circle: None,
+            },
+            sky: SkyOptions {
+                crop: true,
+                north_deg: compass,
+                north_from_sun: true,
+                sun: SunMode::Auto,
+                time: Some("2026-06-21T10:00:00+02:00".into()),
+                latitude_deg: Some(47.0),
+                longitude_deg: Some(8.3),
+                ..SkyOptions::default()
+            },
+            ..Options::default()
+        };
+        pipeline::run(demo_input(), &o, &mut pipeline::no_progress).expect("run")
+    };
+    let a = run(Some(0.0));
+    let b = run(Some(40.0));
+    let c = run(None);
+    let na = a.report.geometry.as_ref().unwrap().north_from_sun.unwrap();
+    let nb = b.report.geometry.as_ref().unwrap().north_from_sun.unwrap();
+    let nc = c.report.geometry.as_ref().unwrap().north_from_sun.unwrap();
+    for n in [nb, nc] {
+        let d = (n.north_deg - na.north_deg + 540.0).rem_euclid(360.0) - 180.0;
+        assert!(d.abs() < 0.01, "{n:?} vs {na:?}");
+    }
+    assert_eq!(nc.compass_error_deg, None);
+    let e = nb.compass_error_deg.unwrap();
+    assert!(((40.0 + e).rem_euclid(360.0) - nb.north_deg).abs() < 1e-9);
+    // With that north the observed sun sits at the computed azimuth.
+    let g = a.report.geometry.as_ref().unwrap();
+    let (sun, eph) = (g.sun.unwrap(), g.sun_ephemeris.unwrap());
+    let daz = (sun.azimuth_deg.unwrap() - eph.azimuth_deg + 540.0).rem_euclid(360.0) - 180.0;
+    assert!(daz.abs() < 0.05, "{daz}");
+    assert!(g.north.is_some() && a.meta.north.is_some());
+    // Without a place there is no ephemeris to set north from.
+    let o = Options {
+        lens: LensSource::Detect {
+            model: LensKind::Equidistant,
+            fov_deg: 235.0,
+            circle: None,
+        },
+        sky: SkyOptions {
+            north_from_sun: true,
+            ..SkyOptions::default()
+        },
+        ..Options::default()
+    };
+    assert!(matches!(
+        pipeline::run(demo_input(), &o, &mut pipeline::no_progress),
+        Err(PipelineError::NoEphemeris)
+    ));
+}

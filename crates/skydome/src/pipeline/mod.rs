@@ -40,7 +40,7 @@ use crate::sampling::SampleReport;
 use crate::sky::{DevicePose, SkyError};
 use crate::tonemap::{self, ToneMap, TonemapError};
 
-pub use sky_stage::{GeometryReport, SunSource};
+pub use sky_stage::{GeometryReport, NorthFromSun, SunSource};
 
 /// Errors of [`run`]: the stage's own error, or cancellation.
 #[derive(Debug, thiserror::Error)]
@@ -76,6 +76,9 @@ pub enum PipelineError {
     /// The ephemeris sun was asked for without a time or place.
     #[error("the sun from the ephemeris needs the capture time (EXIF or given) and the place (EXIF GPS or given latitude and longitude)")]
     NoEphemeris,
+    /// North from the sun without an observed sun.
+    #[error("north from the sun needs the sun in the image: detected (sun auto) or tapped, and none was found")]
+    NoSunForNorth,
     /// A sky option was given without a lens.
     #[error("{0} needs a fish-eye lens (a lens profile or circle detection)")]
     NeedsLens(&'static str),
@@ -202,6 +205,9 @@ pub struct SkyOptions {
     /// Compass azimuth of the phone's top edge, degrees from true north towards east. `None`:
     /// unknown (north is not marked and azimuths are not reported).
     pub north_deg: Option<f64>,
+    /// Set north from the sun (observed: detected or tapped) and the ephemeris instead of the
+    /// compass; `north_deg`, when given, is then only reported against. Needs time and place.
+    pub north_from_sun: bool,
     /// How the phone lay.
     pub pose: DevicePose,
     /// How the sun is found.
@@ -220,6 +226,7 @@ impl Default for SkyOptions {
             crop: false,
             fov_out_deg: 180.0,
             north_deg: None,
+            north_from_sun: false,
             pose: DevicePose::ScreenDown,
             sun: SunMode::Auto,
             time: None,
@@ -639,7 +646,7 @@ fn check_options(o: &Options) -> Result<(), PipelineError> {
     let s = &o.sky;
     let needs = [
         (s.crop, "cropping to the dome"),
-        (s.north_deg.is_some(), "north"),
+        (s.north_deg.is_some() || s.north_from_sun, "north"),
         (o.products.equirect.is_some(), "the equirectangular map"),
         (o.products.overlay, "the overlay"),
         (o.products.angular, "the angular dome"),

@@ -62,10 +62,56 @@ pub struct GeometryReport {
     pub sun_ephemeris: Option<Direction>,
     /// Agreement between the detected (or tapped) and the computed sun.
     pub sun_cross_check: Option<SunCrossCheck>,
+    /// North as set from the sun, when asked.
+    pub north_from_sun: Option<NorthFromSun>,
     /// Horizontal illuminance of the dome (θ ≤ 90°, cosine-weighted), Radiance's way
     /// ([`sky::radiance_luminance`] of the horizontal irradiance): lux when the radiance is
     /// absolute, relative units otherwise. What `evalglare -V` reports for the upward dome.
     pub horizontal_illuminance: f64,
+}
+
+/// North set from the observed sun and the ephemeris (a clip-on lens with a magnet biases the
+/// phone's compass; the sun does not).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct NorthFromSun {
+    /// The azimuth of the phone's top edge that puts the observed sun at the computed azimuth,
+    /// degrees from true north towards east, in `0..360`.
+    pub north_deg: f64,
+    /// The compass's value, when one was given.
+    pub compass_deg: Option<f64>,
+    /// The compass's error this implies (`north_deg − compass`, in `−180..180`), degrees.
+    pub compass_error_deg: Option<f64>,
+    /// Elevation of the observed sun minus the computed one, degrees (a check of the lens model
+    /// and the level).
+    pub elevation_error_deg: f64,
+}
+
+/// North from the sun: the sun observed (tapped or detected on the uncropped dome) is matched
+/// to the ephemeris sun; the compass value (or 0) is corrected by the azimuth difference.
+fn north_from_sun(
+    o: &Options,
+    br: &Bracket,
+    lens: &LensProfile,
+    radiance: &HdrImage,
+) -> Result<NorthFromSun, PipelineError> {
+    let eph = ephemeris(o, br)?.ok_or(PipelineError::NoEphemeris)?;
+    let g = full_geometry(o, br, lens)?;
+    let px = match o.sky.sun {
+        SunMode::Tap(p) => Some(p),
+        SunMode::Auto => sky::detect_sun(radiance, &g.horizon_circle()).map(|d| d.pixel),
+        SunMode::None | SunMode::Ephemeris => None,
+    };
+    let dir = px
+        .and_then(|p| g.pixel_to_direction(p))
+        .ok_or(PipelineError::NoSunForNorth)?;
+    let c = sky::cross_check(&dir, &eph);
+    let base = o.sky.north_deg.unwrap_or(0.0);
+    Ok(NorthFromSun {
+        north_deg: (base + c.compass_error_deg).rem_euclid(360.0),
+        compass_deg: o.sky.north_deg,
+        compass_error_deg: o.sky.north_deg.map(|_| c.compass_error_deg),
+        elevation_error_deg: -c.elevation_error_deg,
+    })
 }
 
 /// The sky stage's results.
@@ -105,6 +151,20 @@ pub(super) fn apply(
     (lens, detected): (LensProfile, Option<CircleFit>),
     radiance: HdrImage,
 ) -> Result<SkyResult, PipelineError> {
+    let north_fix = match o.sky.north_from_sun {
+        true => Some(north_from_sun(o, br, &lens, &radiance)?),
+        false => None,
+    };
+    let fixed;
+    let o = match &north_fix {
+        Some(n) => {
+            let mut c = o.clone();
+            c.sky.north_deg = Some(n.north_deg);
+            fixed = c;
+            &fixed
+        }
+        None => o,
+    };
     let s = &o.sky;
     let full = full_geometry(o, br, &lens)?;
     let f = frame(radiance, &lens, full, s.crop.then_some(s.fov_out_deg))?;
@@ -188,6 +248,7 @@ pub(super) fn apply(
             sun_confidence: confidence,
             sun_ephemeris: ephemeris,
             sun_cross_check: cross,
+            north_from_sun: north_fix,
             horizontal_illuminance: sky::radiance_luminance(
                 reproject::horizontal_irradiance_fisheye(&f.image, &f.geom),
             ),
