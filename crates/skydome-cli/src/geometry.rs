@@ -9,7 +9,7 @@ use skydome::formats::PixelPoint;
 use skydome::image::Circle;
 use skydome::pipeline::{EquirectOptions, LensSource, Products, SkyOptions, SunMode};
 use skydome::reproject::Ground;
-use skydome::sky::DevicePose;
+use skydome::sky::{DevicePose, Level};
 
 /// Fish-eye options of `skydome merge`.
 #[derive(Debug, Clone, clap::Args)]
@@ -43,6 +43,22 @@ pub struct GeometryArgs {
     /// How the phone lay: screen-down (rear camera looks up, the usual) or screen-up.
     #[arg(long, default_value = "screen-down", value_parser = parse_pose)]
     pub device_pose: DevicePose,
+    /// The phone's accelerometer reading at rest, x,y,z in its own axes (x right edge, y top
+    /// edge, z out of the screen; pointing up, as Android and Chrome report it): levels a
+    /// tilted dome.
+    #[arg(long, allow_hyphen_values = true, value_name = "X,Y,Z", value_parser = parse_gravity, conflicts_with = "tilt")]
+    pub gravity: Option<[f64; 3]>,
+    /// Tilt of the optical axis from the zenith, degrees (with --tilt-azimuth): levels the dome.
+    #[arg(long, value_name = "DEG")]
+    pub tilt: Option<f64>,
+    /// Compass azimuth the optical axis leans towards, degrees (with --tilt).
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        value_name = "DEG",
+        default_value_t = 0.0
+    )]
+    pub tilt_azimuth: f64,
     /// The sun: `auto` (detect the brightest blob), `none`, `ephemeris` (from time and place),
     /// or `X,Y` (a pixel of the input photos, origin top-left).
     #[arg(long, default_value = "auto", value_parser = parse_sun)]
@@ -72,6 +88,18 @@ pub struct GeometryArgs {
     /// Also write a preview with the circles, north (blue) and sun (yellow) drawn on it (.png/.jpg).
     #[arg(long, value_name = "FILE")]
     pub overlay: Option<PathBuf>,
+}
+
+fn parse_gravity(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}': expected X,Y,Z"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!("'{s}': expected three numbers X,Y,Z")),
+    }
 }
 
 /// `--north`: a compass azimuth or `from-sun`.
@@ -187,6 +215,14 @@ impl GeometryArgs {
                 None => None,
             },
             north_from_sun: self.north == Some(North::FromSun),
+            level: match (self.gravity, self.tilt) {
+                (Some(g), _) => Some(Level::Gravity(g)),
+                (None, Some(t)) => Some(Level::Tilt {
+                    tilt_deg: t,
+                    azimuth_deg: self.tilt_azimuth,
+                }),
+                (None, None) => None,
+            },
             pose: self.device_pose,
             // Without a lens there is no sky geometry; `auto` then simply finds nothing.
             sun: if self.enabled() {

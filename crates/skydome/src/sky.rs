@@ -302,6 +302,94 @@ impl SkyGeometry {
         })
     }
 
+    /// The same geometry for a phone that was not lying level: the camera basis is rebuilt from
+    /// the accelerometer (`Level::Gravity`, with the compass azimuth and pose given to [`new`])
+    /// or rotated by a tilt of the optical axis (`Level::Tilt`). Errors for a reading that
+    /// cannot be a phone looking up (zero, the top edge vertical, the camera facing the ground).
+    ///
+    /// [`new`]: SkyGeometry::new
+    pub fn with_level(&self, level: &Level) -> Result<SkyGeometry, SkyError> {
+        let (right, down, axis) = match *level {
+            Level::Gravity(g) => self.basis_from_gravity(g)?,
+            Level::Tilt {
+                tilt_deg,
+                azimuth_deg,
+            } => {
+                if !(tilt_deg.is_finite()
+                    && (0.0..90.0).contains(&tilt_deg)
+                    && azimuth_deg.is_finite())
+                {
+                    return Err(SkyError::BadParameter {
+                        what: "tilt (degrees)",
+                        value: tilt_deg,
+                        hint: "give the optical axis's tilt from the zenith, 0 to 90°, and a finite azimuth",
+                    });
+                }
+                let (t, a) = (tilt_deg.to_radians(), azimuth_deg.to_radians());
+                // Rotate about the horizontal axis k = up × (towards a), taking up to a.
+                let k = [-a.cos(), a.sin(), 0.0];
+                let rot = |v: [f64; 3]| -> [f64; 3] {
+                    let (c, s) = (t.cos(), t.sin());
+                    let kv = cross(k, v);
+                    let kd = dot(k, v) * (1.0 - c);
+                    [0, 1, 2].map(|i| v[i] * c + kv[i] * s + k[i] * kd)
+                };
+                (rot(self.right), rot(self.down), rot(self.axis))
+            }
+        };
+        Ok(SkyGeometry {
+            right,
+            down,
+            axis,
+            ..self.clone()
+        })
+    }
+
+    /// (right, down, axis) in ENU from the accelerometer's up vector `g` in the phone's axes.
+    #[allow(clippy::type_complexity)]
+    fn basis_from_gravity(&self, g: [f64; 3]) -> Result<([f64; 3], [f64; 3], [f64; 3]), SkyError> {
+        let bad = |hint| SkyError::BadParameter {
+            what: "gravity vector",
+            value: g[0].hypot(g[1]).hypot(g[2]),
+            hint,
+        };
+        let norm = |v: [f64; 3]| -> Option<[f64; 3]> {
+            let n = dot(v, v).sqrt();
+            (n.is_finite() && n > 1e-9).then(|| v.map(|x| x / n))
+        };
+        let u = norm(g).ok_or_else(|| {
+            bad("give the accelerometer's reading at rest, x,y,z in the phone's axes")
+        })?;
+        // The top edge's horizontal direction, in the phone's axes.
+        let h = norm([-u[1] * u[0], 1.0 - u[1] * u[1], -u[1] * u[2]])
+            .filter(|_| u[1].abs() < 0.99)
+            .ok_or_else(|| {
+                bad("the phone stood on its edge: the top edge must not point up or down")
+            })?;
+        let w = cross(h, u);
+        let a = self.north_azimuth_deg.to_radians();
+        let (rh, rw) = ([a.sin(), a.cos(), 0.0], [a.cos(), -a.sin(), 0.0]);
+        let world = |v: [f64; 3]| -> [f64; 3] {
+            let (ph, pw, pu) = (dot(v, h), dot(v, w), dot(v, u));
+            [0, 1, 2].map(|i| ph * rh[i] + pw * rw[i] + if i == 2 { pu } else { 0.0 })
+        };
+        let (x, y, z) = (
+            world([1.0, 0.0, 0.0]),
+            world([0.0, 1.0, 0.0]),
+            world([0.0, 0.0, 1.0]),
+        );
+        let basis = match self.pose {
+            DevicePose::ScreenDown => (x, neg(y), neg(z)),
+            DevicePose::ScreenUp => (neg(x), neg(y), z),
+        };
+        if basis.2[2] <= 0.0 {
+            return Err(bad(
+                "the camera faced the ground: check the device pose (screen-down or screen-up)",
+            ));
+        }
+        Ok(basis)
+    }
+
     /// The same geometry for an image whose optical centre is at `(cx, cy)` — e.g. after
     /// [`crate::fisheye::crop_dome`], pass its `horizon.cx, horizon.cy`.
     pub fn with_centre(&self, cx: f64, cy: f64) -> SkyGeometry {
@@ -494,6 +582,26 @@ pub const RADIANCE_EFFICACY: f64 = 179.0;
 /// Radiance's W·sr⁻¹·m⁻², in relative units otherwise.
 pub fn radiance_luminance(rgb: [f64; 3]) -> f64 {
     RADIANCE_EFFICACY * (0.265 * rgb[0] + 0.670 * rgb[1] + 0.065 * rgb[2])
+}
+
+/// How the phone lay, when not level (see [`SkyGeometry::with_level`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Level {
+    /// The accelerometer's reading at rest, `[x, y, z]` in the phone's own axes (`x` towards its
+    /// right edge, `y` its top edge, `z` out of the screen), any unit. It points **up**, away
+    /// from the ground, as Android's gravity sensor and Chrome's
+    /// `DeviceMotionEvent.accelerationIncludingGravity` report it: lying screen-down it is
+    /// `(0, 0, −9.81)`.
+    Gravity([f64; 3]),
+    /// The optical axis tilted `tilt_deg` degrees from the zenith towards compass azimuth
+    /// `azimuth_deg`.
+    Tilt {
+        /// Tilt of the optical axis from the zenith, degrees, `0..90`.
+        tilt_deg: f64,
+        /// Azimuth the axis leans towards, degrees from north towards east.
+        azimuth_deg: f64,
+    },
 }
 
 /// A detected sun.

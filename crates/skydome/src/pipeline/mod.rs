@@ -210,6 +210,10 @@ pub struct SkyOptions {
     pub north_from_sun: bool,
     /// How the phone lay.
     pub pose: DevicePose,
+    /// The phone's tilt, when it was not level (from its accelerometer, or a measured tilt):
+    /// the crop is then resampled so that the zenith is at its centre (north at the top), and
+    /// every map is levelled.
+    pub level: Option<crate::sky::Level>,
     /// How the sun is found.
     pub sun: SunMode,
     /// Capture time, ISO 8601 with a UTC offset; default: EXIF `DateTimeOriginal` + offset.
@@ -228,6 +232,7 @@ impl Default for SkyOptions {
             north_deg: None,
             north_from_sun: false,
             pose: DevicePose::ScreenDown,
+            level: None,
             sun: SunMode::Auto,
             time: None,
             latitude_deg: None,
@@ -647,6 +652,7 @@ fn check_options(o: &Options) -> Result<(), PipelineError> {
     let needs = [
         (s.crop, "cropping to the dome"),
         (s.north_deg.is_some() || s.north_from_sun, "north"),
+        (s.level.is_some(), "a tilt"),
         (o.products.equirect.is_some(), "the equirectangular map"),
         (o.products.overlay, "the overlay"),
         (o.products.angular, "the angular dome"),

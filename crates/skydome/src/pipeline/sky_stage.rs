@@ -6,12 +6,13 @@ use time::OffsetDateTime;
 
 use super::{default_equirect_width, Options, PipelineError, SunMode};
 use crate::bracket::Bracket;
+use crate::fisheye::LensKind;
 use crate::fisheye::{self, CircleFit, LensProfile};
 use crate::formats::{HdrMeta, PixelPoint, SunMark};
 use crate::image::{Circle, HdrImage};
 use crate::overlay::OverlayMarks;
 use crate::reproject::{self, MapProjection, ReprojectOptions};
-use crate::sky::{self, Direction, ImageOrientation, Site, SkyGeometry, SunCrossCheck};
+use crate::sky::{self, DevicePose, Direction, ImageOrientation, Site, SkyGeometry, SunCrossCheck};
 
 /// A detected sun further than this from the computed one is reported as a warning (degrees):
 /// beyond a few solar diameters, and about what a phone compass near a magnet errs by.
@@ -129,17 +130,27 @@ pub(super) struct SkyResult {
 struct Framed {
     image: HdrImage,
     geom: SkyGeometry,
-    /// Input pixel position of output pixel (0, 0).
+    /// Input pixel position of output pixel (0, 0), for a plain crop.
     offset: (f64, f64),
+    /// The input photo's geometry, when the output was resampled to a level dome.
+    resampled_from: Option<SkyGeometry>,
     crop_radius: Option<f64>,
 }
 
 impl Framed {
-    /// An input-photo pixel position in the output image.
-    fn shift(&self, p: PixelPoint) -> PixelPoint {
-        PixelPoint {
-            x: p.x - self.offset.0,
-            y: p.y - self.offset.1,
+    /// An input-photo pixel position in the output image (`None` when a level dome does not
+    /// show it).
+    fn shift(&self, p: PixelPoint) -> Option<PixelPoint> {
+        match &self.resampled_from {
+            Some(src) => {
+                let v = src.pixel_to_vector(p.x, p.y)?;
+                let (x, y) = self.geom.vector_to_pixel(v)?;
+                Some(PixelPoint { x, y })
+            }
+            None => Some(PixelPoint {
+                x: p.x - self.offset.0,
+                y: p.y - self.offset.1,
+            }),
         }
     }
 }
@@ -167,7 +178,10 @@ pub(super) fn apply(
     };
     let s = &o.sky;
     let full = full_geometry(o, br, &lens)?;
-    let f = frame(radiance, &lens, full, s.crop.then_some(s.fov_out_deg))?;
+    let f = match (s.level.is_some(), s.crop) {
+        (true, true) => level_dome(&radiance, &lens, full, s.fov_out_deg)?,
+        _ => frame(radiance, &lens, full, s.crop.then_some(s.fov_out_deg))?,
+    };
     let horizon = f.geom.horizon_circle();
     let north = s.north_deg.map(|_| f.geom.north_point());
     let ephemeris = ephemeris(o, br)?;
@@ -217,11 +231,12 @@ pub(super) fn apply(
         true => Some(angular_map(&f, horizon.r, sun_dir, s.north_deg.is_some())?),
         false => None,
     };
-    let visible = Circle {
+    // A level dome is resampled: the lens's circle is no circle in it.
+    let visible = f.resampled_from.is_none().then_some(Circle {
         cx: lens.circle.cx - f.offset.0,
         cy: lens.circle.cy - f.offset.1,
         r: lens.circle.r,
-    };
+    });
     Ok(SkyResult {
         meta: HdrMeta {
             sun,
@@ -232,7 +247,7 @@ pub(super) fn apply(
         equirect,
         angular,
         marks: OverlayMarks {
-            visible: Some(visible),
+            visible,
             horizon: Some(horizon),
             north,
             sun: sun_px,
@@ -266,12 +281,11 @@ pub(super) fn full_geometry(
     lens: &LensProfile,
 ) -> Result<SkyGeometry, PipelineError> {
     let orient = ImageOrientation::from_exif(br.pixel_orientation)?;
-    Ok(SkyGeometry::new(
-        lens,
-        o.sky.north_deg.unwrap_or(0.0),
-        o.sky.pose,
-        orient,
-    )?)
+    let g = SkyGeometry::new(lens, o.sky.north_deg.unwrap_or(0.0), o.sky.pose, orient)?;
+    Ok(match &o.sky.level {
+        Some(level) => g.with_level(level)?,
+        None => g,
+    })
 }
 
 /// Crops to the dome of `crop_fov_deg` when given, moving the geometry's centre with it.
@@ -287,6 +301,7 @@ fn frame(
             Framed {
                 geom: full.with_centre(c.horizon.cx, c.horizon.cy),
                 offset: (c.offset_x as f64, c.offset_y as f64),
+                resampled_from: None,
                 crop_radius: Some(c.crop_radius_px),
                 image: c.image,
             }
@@ -295,8 +310,55 @@ fn frame(
             image: radiance,
             geom: full,
             offset: (0.0, 0.0),
+            resampled_from: None,
             crop_radius: None,
         },
+    })
+}
+
+/// The dome of `fov_deg` of a tilted photo, resampled so that the zenith is at its centre: the
+/// lens's own projection (equidistant for a polynomial lens) and resolution, north (as far as it
+/// is known) at the top, east on the left.
+fn level_dome(
+    radiance: &HdrImage,
+    lens: &LensProfile,
+    full: SkyGeometry,
+    fov_deg: f64,
+) -> Result<Framed, PipelineError> {
+    let kind = match lens.projection.kind() {
+        LensKind::Polynomial => LensKind::Equidistant,
+        k => k,
+    };
+    let r = lens.radius_at_deg(0.5 * fov_deg)?;
+    let size = (2.0 * r.ceil()).clamp(16.0, 32768.0) as usize;
+    let half = 0.5 * size as f64;
+    let target = MapProjection::Fisheye {
+        size,
+        model: kind,
+        fov_deg,
+    };
+    let image = reproject::reproject(radiance, &full, &target, &ReprojectOptions::default())?;
+    let out_lens = LensProfile::from_fov(
+        Circle {
+            cx: half,
+            cy: half,
+            r: half,
+        },
+        fov_deg,
+        kind,
+    )?;
+    let geom = SkyGeometry::new(
+        &out_lens,
+        0.0,
+        DevicePose::ScreenDown,
+        ImageOrientation::Normal,
+    )?;
+    Ok(Framed {
+        image,
+        geom,
+        offset: (0.0, 0.0),
+        resampled_from: Some(full),
+        crop_radius: Some(r),
     })
 }
 
@@ -344,7 +406,7 @@ fn find_sun(
 ) -> (Option<PixelPoint>, Option<SunSource>, Option<f64>) {
     match mode {
         SunMode::None => (None, None, None),
-        SunMode::Tap(p) => (Some(f.shift(p)), Some(SunSource::Tap), None),
+        SunMode::Tap(p) => (f.shift(p), Some(SunSource::Tap), None),
         SunMode::Ephemeris => (
             ephemeris.and_then(|d| f.geom.direction_to_pixel(d)),
             Some(SunSource::Ephemeris),
