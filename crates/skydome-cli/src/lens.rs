@@ -73,6 +73,10 @@ pub struct FitArgs {
     /// orthographic or polynomial.
     #[arg(long, default_value = "auto")]
     pub model: String,
+    /// Vignetting measurements, CSV lines `angle_deg,relative_value` (1 on the axis): the
+    /// fitted fall-off V(θ) goes into the profile and the merge divides it out.
+    #[arg(long, value_name = "falloff.csv")]
+    pub vignetting: Option<PathBuf>,
     /// The lens profile to write.
     #[arg(short, long, value_name = "lens.json")]
     pub output: PathBuf,
@@ -204,6 +208,22 @@ fn fit(a: FitArgs, quiet: bool) -> Result<()> {
         }
         _ => bail!("give --csv pairs.csv --centre CX,CY (measured angles), or --circle CX,CY,R with --fov (nominal lens)"),
     };
+    let mut profile = profile;
+    if let Some(csv) = &a.vignetting {
+        let pts: Vec<(f64, f64)> = read_pairs(csv)?
+            .iter()
+            .map(|p| (p.angle_deg, p.radius_px))
+            .collect();
+        let v = fisheye::Vignetting::fit(&pts).with_context(|| csv.display().to_string())?;
+        if !quiet && !a.json {
+            let [v30, v60, v90] = v.at_30_60_90();
+            crate::out(&format!(
+                "vignetting: V(30°) = {v30:.3}, V(60°) = {v60:.3}, V(90°) = {v90:.3} (rms {:.4} over {} measurements)",
+                v.rms, v.samples
+            ));
+        }
+        profile.vignetting = Some(v);
+    }
     let mut out = Outputs::default();
     out.add(
         &a.output,

@@ -233,6 +233,7 @@ impl MapProjection {
                     rms_px: 0.0,
                     max_px: 0.0,
                     candidates: Vec::new(),
+                    vignetting: None,
                 };
                 Mapper::Fisheye(Box::new(SkyGeometry::new(
                     &lens,

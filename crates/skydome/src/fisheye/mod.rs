@@ -64,7 +64,7 @@ pub use fit::{fit_projection, parse_angle_radius_csv, AngleRadius, LensFit, Mode
 pub use projection::{LensKind, Projection};
 // The lens-profile JSON format lives with the other formats; re-exported here, where users
 // of the lens model look for it.
-pub use crate::formats::lens_profile::{LensProfile, LENS_PROFILE_VERSION};
+pub use crate::formats::lens_profile::{devignette, LensProfile, Vignetting, LENS_PROFILE_VERSION};
 
 /// Errors from lens fitting, lens profiles, circle detection and cropping.
 #[derive(Debug, thiserror::Error)]

@@ -30,6 +30,112 @@ pub struct LensProfile {
     /// Every model tried, for the report.
     #[serde(default)]
     pub candidates: Vec<ModelFit>,
+    /// The lens's radial fall-off (vignetting), when measured; the merge divides it out.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vignetting: Option<Vignetting>,
+}
+
+/// Radial fall-off `V(θ) = 1 + a₁θ² + a₂θ⁴ + a₃θ⁶` (θ in radians from the optical axis,
+/// `V(0) = 1`): the fraction of the on-axis response a ray at θ gets.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Vignetting {
+    /// `[a₁, a₂, a₃]`.
+    pub coefficients: [f64; 3],
+    /// RMS residual of the fit, in relative value.
+    pub rms: f64,
+    /// Number of measurements fitted.
+    pub samples: usize,
+}
+
+impl Vignetting {
+    /// `V(θ)`, θ in radians, floored at 0.01 (so dividing by it stays finite).
+    pub fn at(&self, theta: f64) -> f64 {
+        let t2 = theta * theta;
+        let [a1, a2, a3] = self.coefficients;
+        (1.0 + t2 * (a1 + t2 * (a2 + t2 * a3))).max(0.01)
+    }
+
+    /// `V` at 30°, 60° and 90°, for reports.
+    pub fn at_30_60_90(&self) -> [f64; 3] {
+        [30f64, 60.0, 90.0].map(|d| self.at(d.to_radians()))
+    }
+
+    /// Fits `V` to `(angle in degrees, relative value)` measurements (the value at 0° is 1; the
+    /// usual procedure rotates the camera in front of a fixed uniform target) by linear least
+    /// squares on `V − 1`. Needs at least 3 measurements at distinct angles above 0°.
+    pub fn fit(points: &[(f64, f64)]) -> Result<Self, FisheyeError> {
+        let usable: Vec<(f64, f64)> = points
+            .iter()
+            .filter(|(a, _)| *a > 0.0)
+            .map(|&(a, v)| (a.to_radians(), v))
+            .collect();
+        for (i, &(a, v)) in points.iter().enumerate() {
+            if !(a.is_finite() && (0.0..180.0).contains(&a) && v.is_finite() && v > 0.0) {
+                return Err(FisheyeError::BadSample {
+                    index: i,
+                    angle_deg: a,
+                    radius_px: v,
+                });
+            }
+        }
+        let mut distinct: Vec<f64> = usable.iter().map(|p| p.0).collect();
+        distinct.sort_by(f64::total_cmp);
+        distinct.dedup();
+        if distinct.len() < 3 {
+            return Err(FisheyeError::BadParameter {
+                what: "vignetting measurements at distinct angles",
+                value: distinct.len() as f64,
+                hint: "measure the fall-off at 3 or more angles above 0°",
+            });
+        }
+        let basis = |t: f64| {
+            let t2 = t * t;
+            [t2, t2 * t2, t2 * t2 * t2]
+        };
+        let mut ata = nalgebra::Matrix3::<f64>::zeros();
+        let mut atb = nalgebra::Vector3::<f64>::zeros();
+        for &(t, v) in &usable {
+            let b = basis(t);
+            for i in 0..3 {
+                atb[i] += b[i] * (v - 1.0);
+                for j in 0..3 {
+                    ata[(i, j)] += b[i] * b[j];
+                }
+            }
+        }
+        let x = ata.lu().solve(&atb).ok_or(FisheyeError::BadParameter {
+            what: "vignetting fit",
+            value: f64::NAN,
+            hint: "the measurements do not determine a fall-off; spread them over the field",
+        })?;
+        let coefficients = [x[0], x[1], x[2]];
+        let mut v = Vignetting {
+            coefficients,
+            rms: 0.0,
+            samples: usable.len(),
+        };
+        let rss: f64 = usable.iter().map(|&(t, m)| (v.at(t) - m).powi(2)).sum();
+        v.rms = (rss / usable.len() as f64).sqrt();
+        Ok(v)
+    }
+}
+
+/// Divides the lens's fall-off out of `img` (pixels in the lens's frame: its circle's centre is
+/// the optical axis); pixels beyond the projection's reach are left as they are.
+pub fn devignette(img: &mut crate::image::HdrImage, lens: &LensProfile, v: &Vignetting) {
+    let (cx, cy) = (lens.circle.cx, lens.circle.cy);
+    let limit = lens.projection.theta_limit();
+    let w = img.width;
+    for (y, row) in img.data.chunks_exact_mut(3 * w.max(1)).enumerate() {
+        let dy = y as f64 + 0.5 - cy;
+        for (x, px) in row.chunks_exact_mut(3).enumerate() {
+            let rho = (x as f64 + 0.5 - cx).hypot(dy);
+            if let Some(t) = lens.projection.theta_within(rho, limit) {
+                let k = (1.0 / v.at(t)) as f32;
+                px.iter_mut().for_each(|c| *c *= k);
+            }
+        }
+    }
 }
 
 impl LensProfile {
@@ -45,6 +151,7 @@ impl LensProfile {
             rms_px: 0.0,
             max_px: 0.0,
             candidates: Vec::new(),
+            vignetting: None,
         };
         p.validate()?;
         Ok(p)
@@ -68,6 +175,7 @@ impl LensProfile {
             rms_px: fit.best.rms_px,
             max_px: fit.best.max_px,
             candidates: fit.candidates.clone(),
+            vignetting: None,
         };
         p.validate()?;
         Ok(p)

@@ -483,6 +483,11 @@ pub fn run(
         ..HdrMeta::default()
     };
     let mut radiance = merged.radiance;
+    if let Some((l, _)) = &lens {
+        if let Some(v) = &l.vignetting {
+            fisheye::devignette(&mut radiance, l, v);
+        }
+    }
     let photometry = calibrate_absolute(options, &br, lens.as_ref().map(|l| &l.0), &mut radiance)?;
     if let Some(p) = &photometry {
         meta.other.push(absolute_header_line(p));
