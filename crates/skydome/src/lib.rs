@@ -23,6 +23,7 @@ pub mod fisheye;
 pub mod formats;
 pub mod image;
 pub mod merge;
+pub mod noise;
 pub mod overlay;
 pub mod plot;
 pub mod render;

@@ -120,6 +120,10 @@ pub enum Weighting {
     /// mid-grey and for the longest below it (the default).
     #[default]
     Hat,
+    /// Inverse variance of each vote under a camera noise model (shot, read, quantisation and
+    /// JPEG noise; see [`crate::noise`]): a longer exposure, which collected more light, counts
+    /// for more. Zero at the black level and 255, fading to zero over the top codes.
+    Noise,
 }
 
 /// Debevec's hat weight of an 8-bit code: `z` up to 127, `255 − z` above; zero at 0 and 255.

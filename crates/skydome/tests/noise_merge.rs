@@ -1,0 +1,151 @@
+//! The noise-aware merge (`Weighting::Noise`) against ground truth on phone-like brackets, the
+//! hat on the same frames, and OpenCV's Debevec merge on real brackets.
+mod common;
+
+use skydome::compare::well_exposed_mask;
+use skydome::merge::{merge, MergeOptions, Weighting};
+use skydome::noise::estimate;
+use skydome::response::{calibrate, CalibrateOptions, Response};
+use skydome::synth::{generate, SynthBracket, SynthOptions};
+use skydome::HdrImage;
+
+/// A phone-like bracket: full well 3000 e⁻, read noise 3 e⁻, JPEG quality 95 (4:2:0).
+fn phone(evs: &[f64], seed: u64, size: usize) -> SynthBracket {
+    generate(&SynthOptions {
+        width: size,
+        height: size,
+        evs: evs.to_vec(),
+        seed,
+        jpeg_quality: Some(95),
+        full_well: 3000.0,
+        read_noise: 3.0,
+        ..SynthOptions::default()
+    })
+    .unwrap()
+}
+
+/// Per channel, log2 RMSE (stops) against the truth inside `mask`, after one least-squares
+/// scale per channel in the log domain.
+fn log2_rmse_per_channel(a: &HdrImage, truth: &HdrImage, mask: &[bool]) -> [f64; 3] {
+    [0, 1, 2].map(|c| {
+        let d: Vec<f64> = mask
+            .iter()
+            .enumerate()
+            .filter(|(p, &m)| m && truth.data[3 * p + c] > 0.0 && a.data[3 * p + c] > 0.0)
+            .map(|(p, _)| (a.data[3 * p + c] as f64 / truth.data[3 * p + c] as f64).log2())
+            .collect();
+        let mean = d.iter().sum::<f64>() / d.len() as f64;
+        (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt()
+    })
+}
+
+/// The true response with the gauge `g(128) = 0`, as a calibration would give it.
+fn true_response(b: &SynthBracket) -> Response {
+    Response::from_curves(
+        b.true_g
+            .clone()
+            .map(|g| g.iter().map(|v| v - g[128]).collect()),
+    )
+    .unwrap()
+}
+
+fn run(b: &SynthBracket, r: &Response, w: Weighting) -> [f64; 3] {
+    let m = merge(
+        &b.frames,
+        r,
+        &MergeOptions {
+            weighting: w,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let mask = well_exposed_mask(&b.frames, 10, 245).unwrap();
+    log2_rmse_per_channel(&m.radiance, &b.truth, &mask)
+}
+
+/// With the camera's true response, inverse-variance weights beat the hat in every channel of
+/// every bracket (3 frames 2 EV apart and 5 frames 1 EV apart, four scenes). Measured (log2
+/// RMSE R/G/B, stops, 384², hat → noise): seed 1 3×2 EV 0.208/0.219/0.321 → 0.196/0.196/0.263;
+/// seed 2 5×1 EV 0.215/0.251/0.371 → 0.204/0.206/0.285. The floor is the sensor: the dim
+/// ground collects ≈ 50 e⁻ even in the longest frame, ≈ 0.2 stops of shot noise.
+#[test]
+fn noise_weights_beat_the_hat_with_the_true_curve_on_phone_like_brackets() {
+    for (evs, seed) in [
+        (vec![-2.0, 0.0, 2.0], 1),
+        (vec![-2.0, -1.0, 0.0, 1.0, 2.0], 2),
+        (vec![-2.0, 0.0, 2.0], 3),
+        (vec![-2.0, -1.0, 0.0, 1.0, 2.0], 4),
+    ] {
+        let b = phone(&evs, seed, 256);
+        let truth_r = true_response(&b);
+        let hat = run(&b, &truth_r, Weighting::Hat);
+        let noise = run(&b, &truth_r, Weighting::Noise);
+        println!(
+            "{} frames, seed {seed}, true curve: hat {hat:.4?} noise {noise:.4?}",
+            evs.len()
+        );
+        let mean = |v: [f64; 3]| v.iter().sum::<f64>() / 3.0;
+        assert!(mean(noise) < 0.95 * mean(hat), "{noise:?} vs {hat:?}");
+        for c in 0..3 {
+            assert!(
+                noise[c] < 1.02 * hat[c],
+                "channel {c}: {noise:?} vs {hat:?}"
+            );
+        }
+        // Self-calibrated: reported, not asserted (see docs/accuracy.md: the calibrated
+        // curve's error at the top codes, which the noise weights trust more, outweighs the
+        // gain on this scene).
+        let cal = calibrate(&b.frames, b.circle, &CalibrateOptions::default()).unwrap();
+        let hc = run(&b, &cal.response, Weighting::Hat);
+        let nc = run(&b, &cal.response, Weighting::Noise);
+        println!("  calibrated: hat {hc:.4?} noise {nc:.4?}");
+    }
+}
+
+/// The estimated model is fitted on every bracket, finite, and of the right order: the
+/// simulated sensor collects ≈ 230 e⁻ at code 128 in green (JPEG smooths some noise away, so
+/// the effective count the frames show is higher, never lower).
+#[test]
+fn noise_model_is_estimated_from_the_bracket() {
+    for seed in [1, 2] {
+        let b = phone(&[-2.0, 0.0, 2.0], seed, 256);
+        let truth_r = true_response(&b);
+        let est = estimate(&b.frames, &truth_r, 0, None);
+        println!("seed {seed}: {est:?}");
+        assert!(est.fitted && est.model.is_valid());
+        let k = est.model.channels[1].electrons_at_gauge;
+        assert!((150.0..2000.0).contains(&k), "{k}");
+    }
+    // A bracket with nothing well exposed in two frames falls back to the default.
+    let mut b = phone(&[-2.0, 0.0, 2.0], 1, 64);
+    for f in &mut b.frames {
+        if let skydome::bracket::Pixels::U8(v) = &mut f.pixels {
+            v.fill(0);
+        }
+    }
+    let r = Response::linear();
+    let est = estimate(&b.frames, &r, 0, None);
+    assert!(!est.fitted);
+    let m = merge(
+        &b.frames,
+        &r,
+        &MergeOptions {
+            weighting: Weighting::Noise,
+            clipped_mask: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(m.warnings(None).iter().any(|w| w.contains("noise model")));
+    // Black in every frame: flagged, neutral, and said.
+    assert_eq!(m.black_pixels, 64 * 64);
+    assert!(m
+        .radiance
+        .data
+        .chunks(3)
+        .all(|p| p[0] == p[1] && p[1] == p[2] && p[0].is_finite()));
+    assert!(m
+        .warnings(None)
+        .iter()
+        .any(|w| w.contains("black in every frame")));
+}
