@@ -996,7 +996,7 @@ mod tests {
                     };
                     let w = match weighting {
                         Weighting::None => 1.0,
-                        Weighting::Hat => {
+                        Weighting::Hat | Weighting::Noise => {
                             let mut w = z.min(255.0 - z).max(0.0);
                             if (j == 0 && z >= 127.5) || (j + 1 == p && z <= 127.5) {
                                 w = 127.0;
