@@ -126,6 +126,8 @@ pub enum Weighting {
     Noise,
 }
 
+crate::named_enum!(Weighting, "weighting", [None => "none", Hat => "hat"]);
+
 /// Debevec's hat weight of an 8-bit code: `z` up to 127, `255 − z` above; zero at 0 and 255.
 #[inline]
 pub fn hat(z: u8) -> f64 {
@@ -240,6 +242,8 @@ pub enum Solver {
     /// The seed's dense SVD of the full system (slow; a reference).
     DenseSvd,
 }
+
+crate::named_enum!(Solver, "solver", [Schur => "schur", DenseSvd => "svd"]);
 
 /// Calibration options.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
