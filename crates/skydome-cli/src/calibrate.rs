@@ -157,6 +157,9 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         calibration =
             response::calibrate(&br.frames, a.calib.circle, &opts).context("calibration failed")?;
         report.sampling = Some(calibration.report());
+        if let Some(w) = calibration.report().shortfall_warning() {
+            io::warn(quiet, &w);
+        }
         report.monotonic_fixes = Some(calibration.monotonic_fixes);
         if let Some(k) = a.repeat {
             let s = response::stability(&br.frames, a.calib.circle, &opts, k)

@@ -17,6 +17,7 @@
 //! The crate has no command-line or filesystem-walking dependencies and builds for
 //! `wasm32-unknown-unknown`.
 
+pub mod align;
 pub mod bracket;
 pub mod compare;
 pub mod fisheye;

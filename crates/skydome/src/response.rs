@@ -126,7 +126,7 @@ pub enum Weighting {
     Noise,
 }
 
-crate::named_enum!(Weighting, "weighting", [None => "none", Hat => "hat"]);
+crate::named_enum!(Weighting, "weighting", [None => "none", Hat => "hat", Noise => "noise"]);
 
 /// Debevec's hat weight of an 8-bit code: `z` up to 127, `255 − z` above; zero at 0 and 255.
 #[inline]
@@ -327,6 +327,7 @@ impl Calibration {
             model: None,
             iso: None,
             date: None,
+            noise: None,
         }
     }
 }
@@ -972,6 +973,11 @@ pub struct CameraProfile {
     pub iso: Option<f64>,
     /// Calibration date.
     pub date: Option<String>,
+    /// The camera's noise model (see [`crate::noise`]) for [`Weighting::Noise`], when known.
+    /// Optional: profiles written before it existed load without it, and the merge then
+    /// estimates it from the bracket.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<crate::noise::NoiseModel>,
 }
 
 impl CameraProfile {
@@ -989,6 +995,7 @@ impl CameraProfile {
             model: None,
             iso: None,
             date: None,
+            noise: None,
         }
     }
 

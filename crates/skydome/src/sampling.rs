@@ -249,6 +249,28 @@ pub struct SampleReport {
     pub frames: usize,
 }
 
+impl SampleReport {
+    /// A warning when the samples used give fewer observations than the solve needs,
+    /// `used · (frames − 1) < 255`: parts of the curve are then held by the smoothness term
+    /// alone, and the curve may be wrong without looking it. `None` when there are enough.
+    pub fn shortfall_warning(&self) -> Option<String> {
+        let have = self.used * self.frames.saturating_sub(1);
+        if have >= 255 {
+            return None;
+        }
+        let need = 255usize.div_ceil(self.frames.saturating_sub(1).max(1));
+        Some(format!(
+            "CALIBRATION UNDER-CONSTRAINED: only {} of {} requested sample positions were usable ({} rejected as clipped, {} as edges, {} as non-monotonic), giving {} observations where at least 255 are needed; the response curve is partly guessed. Use more samples (at least {need}), a bracket with more frames or smaller steps, a less clipped or less textured scene, or a saved camera profile",
+            self.used,
+            self.target,
+            self.rejected_clipped,
+            self.rejected_edge,
+            self.rejected_non_monotonic,
+            have
+        ))
+    }
+}
+
 /// The chosen positions and their (binned 8-bit) values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Samples {
@@ -539,6 +561,24 @@ fn reject_reason(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn too_few_usable_samples_give_a_loud_warning() {
+        let mut r = SampleReport {
+            requested: 100,
+            target: 128,
+            used: 33,
+            frames: 3,
+            ..Default::default()
+        };
+        let w = r.shortfall_warning().unwrap();
+        assert!(
+            w.contains("33 of 128") && w.contains("66 observations"),
+            "{w}"
+        );
+        r.used = 128;
+        assert_eq!(r.shortfall_warning(), None);
+    }
     use crate::bracket::Exposure;
 
     fn gradient_frames(w: usize, h: usize) -> Vec<Frame> {

@@ -149,3 +149,78 @@ fn noise_model_is_estimated_from_the_bracket() {
         .iter()
         .any(|w| w.contains("black in every frame")));
 }
+
+/// A "cloud" that moved between exposures: a block of the longest frame is replaced by what
+/// that frame saw 40 pixels away. The consistency test flags the block (and little else); the
+/// ghost-aware merge brings the block back towards the truth.
+#[test]
+fn moved_content_is_flagged_and_the_ghost_aware_merge_repairs_it() {
+    let b = generate(&SynthOptions {
+        width: 256,
+        height: 256,
+        fisheye: false,
+        seed: 5,
+        ..SynthOptions::default()
+    })
+    .unwrap();
+    let truth_r = true_response(&b);
+    let mut frames = b.frames.clone();
+    let (x0, x1, y0, y1) = (40usize, 100usize, 60usize, 120usize);
+    let last = frames.len() - 1;
+    if let skydome::bracket::Pixels::U8(v) = &mut frames[last].pixels {
+        let orig = v.clone();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                for c in 0..3 {
+                    v[3 * (y * 256 + x) + c] = orig[3 * (y * 256 + x + 40) + c];
+                }
+            }
+        }
+    }
+    let inside = |p: usize| (x0..x1).contains(&(p % 256)) && (y0..y1).contains(&(p / 256));
+    let opts = MergeOptions {
+        consistency: true,
+        ..Default::default()
+    };
+    let plain = merge(&frames, &truth_r, &opts).unwrap();
+    let flags = plain.inconsistent.as_ref().unwrap();
+    let (mut in_flag, mut out_flag, mut n_in) = (0usize, 0usize, 0usize);
+    for (p, &f) in flags.iter().enumerate() {
+        if inside(p) {
+            n_in += 1;
+            in_flag += f as usize;
+        } else {
+            out_flag += f as usize;
+        }
+    }
+    let frac_in = in_flag as f64 / n_in as f64;
+    let frac_out = out_flag as f64 / (flags.len() - n_in) as f64;
+    println!(
+        "flagged {frac_in:.3} inside the moved block, {frac_out:.4} outside; overall {:.4}",
+        plain.inconsistent_fraction()
+    );
+    assert!(frac_in > 0.3, "{frac_in}");
+    assert!(frac_out < 0.02, "{frac_out}");
+    assert!(plain.inconsistent_fraction() > 0.0);
+    let ghost = merge(
+        &frames,
+        &truth_r,
+        &MergeOptions {
+            ghosts: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let block_err = |img: &HdrImage| {
+        let d: Vec<f64> = (0..256 * 256)
+            .filter(|&p| inside(p))
+            .flat_map(|p| (0..3).map(move |c| 3 * p + c))
+            .map(|i| (img.data[i] as f64 / b.truth.data[i] as f64).log2())
+            .collect();
+        let m = d.iter().sum::<f64>() / d.len() as f64;
+        (d.iter().map(|v| (v - m).powi(2)).sum::<f64>() / d.len() as f64).sqrt()
+    };
+    let (e_plain, e_ghost) = (block_err(&plain.radiance), block_err(&ghost.radiance));
+    println!("log2 RMSE in the block: plain {e_plain:.3}, ghost-aware {e_ghost:.3} stops");
+    assert!(e_ghost < 0.7 * e_plain, "{e_plain} {e_ghost}");
+}
