@@ -98,28 +98,35 @@ fn half(img: &[u8], w: usize, h: usize) -> (Vec<u8>, usize, usize) {
     (out, hw, hh)
 }
 
-/// Threshold and exclusion bitmaps: bit 0 = above the median, bit 1 = usable.
-fn bitmaps(img: &[u8]) -> Vec<u8> {
+/// The grey level below which a fraction `q` of the pixels lies.
+fn quantile(img: &[u8], q: f64) -> u8 {
     let mut hist = [0usize; 256];
     for &v in img {
         hist[v as usize] += 1;
     }
-    let (mut acc, mut med) = (0usize, 0u8);
+    let mut acc = 0usize;
     for (v, &n) in hist.iter().enumerate() {
         acc += n;
-        if 2 * acc >= img.len() {
-            med = v as u8;
-            break;
+        if acc as f64 >= q * img.len() as f64 {
+            return v as u8;
         }
     }
+    255
+}
+
+/// Threshold and exclusion bitmaps: bit 0 = above the `q`-quantile, bit 1 = usable.
+fn bitmaps(img: &[u8], q: f64) -> Vec<u8> {
+    let med = quantile(img, q);
     img.iter()
         .map(|&v| (v > med) as u8 | (((v.abs_diff(med)) > EXCLUDE) as u8) << 1)
         .collect()
 }
 
-/// Differing usable bits when `b` is shifted by `(dx, dy)` against `a`.
-fn mismatch(a: &[u8], b: &[u8], w: usize, h: usize, dx: i32, dy: i32) -> u64 {
-    let mut err = 0u64;
+/// The fraction of differing threshold bits among the pixels usable in both when `b` is
+/// shifted by `(dx, dy)` against `a`. A fraction, not a count: a count falls as the overlap
+/// shrinks, which would favour large shifts.
+fn mismatch(a: &[u8], b: &[u8], w: usize, h: usize, dx: i32, dy: i32) -> f64 {
+    let (mut err, mut both) = (0u64, 0u64);
     let (x0, x1) = (dx.max(0) as usize, (w as i32 + dx.min(0)).max(0) as usize);
     for y in 0..h {
         let yb = y as i32 - dy;
@@ -134,10 +141,16 @@ fn mismatch(a: &[u8], b: &[u8], w: usize, h: usize, dx: i32, dy: i32) -> u64 {
         let sb = (x0 as i32 - dx) as usize;
         for (&pa, &pb) in ra[x0..x1].iter().zip(&rb[sb..sb + (x1 - x0)]) {
             // Both usable (bit 1) and threshold bits differ (bit 0).
-            err += (((pa & pb) >> 1) & (pa ^ pb) & 1) as u64;
+            let usable = ((pa & pb) >> 1) & 1;
+            err += (usable & (pa ^ pb)) as u64;
+            both += usable as u64;
         }
     }
-    err
+    if both == 0 {
+        1.0
+    } else {
+        err as f64 / both as f64
+    }
 }
 
 /// Estimates each frame's translation against the middle exposure. Frames must share one size
@@ -149,34 +162,45 @@ pub fn align(frames: &[Frame], opts: &AlignOptions) -> Alignment {
         return Alignment { reference, shifts };
     };
     let levels = (32 - opts.max_shift.clamp(1, 1024).leading_zeros()) as usize;
-    let pyramid = |f: &Frame| {
+    let pyramid = |f: &Frame, q: f64| {
         let mut out = vec![(grey(f), f.width, f.height)];
         for _ in 1..levels {
             let (img, w, h) = match out.last() {
                 Some(l) => (&l.0, l.1, l.2),
                 None => break,
             };
-            if w < 16 || h < 16 {
+            // Levels under ≈ 32 pixels hold too little structure to choose between shifts.
+            if w < 64 || h < 64 {
                 break;
             }
             let next = half(img, w, h);
             out.push(next);
         }
         out.into_iter()
-            .map(|(g, w, h)| (bitmaps(&g), w, h))
+            .map(|(g, w, h)| (bitmaps(&g, q), w, h))
             .collect::<Vec<_>>()
     };
-    let pr = pyramid(rf);
+    let gr = grey(rf);
     for (j, f) in frames.iter().enumerate() {
         if j == reference || (f.width, f.height) != (rf.width, rf.height) {
             continue;
         }
-        let pf = pyramid(f);
+        // The median, unless it is black or clipped in either frame (a long exposure of a sky
+        // is mostly white): then the nearest quantile that splits both frames inside their
+        // range, as Ward suggests for such exposures.
+        let gf = grey(f);
+        let ok = |v: u8| (EXCLUDE + 4..=251 - EXCLUDE).contains(&v);
+        let q = [0.5, 0.4, 0.6, 0.3, 0.7, 0.2, 0.8, 0.1, 0.9]
+            .into_iter()
+            .find(|&q| ok(quantile(&gr, q)) && ok(quantile(&gf, q)))
+            .unwrap_or(0.5);
+        let pr = pyramid(rf, q);
+        let pf = pyramid(f, q);
         let (mut sx, mut sy) = (0i32, 0i32);
         for ((a, w, h), (b, _, _)) in pr.iter().zip(&pf).rev() {
             sx *= 2;
             sy *= 2;
-            let mut best = (u64::MAX, sx, sy);
+            let mut best = (f64::INFINITY, sx, sy);
             for dy in -1..=1 {
                 for dx in -1..=1 {
                     let e = mismatch(a, b, *w, *h, sx + dx, sy + dy);

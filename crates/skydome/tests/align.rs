@@ -30,6 +30,8 @@ fn known_synthetic_shifts_are_recovered_exactly() {
             height: 256,
             seed,
             fisheye,
+            // One stop apart, so every frame keeps structure on both sides of its median.
+            evs: vec![-1.0, 0.0, 1.0],
             jpeg_quality: Some(90),
             ..SynthOptions::default()
         })
