@@ -73,7 +73,7 @@ pub const BLACK_WARN_FRACTION: f64 = 0.001;
 pub const CONSISTENCY_SIGMAS: f32 = 4.0;
 /// Standard deviation (stops) added to every vote in the consistency test for what the noise
 /// model does not describe: the calibrated curve's own error, sub-pixel misregistration.
-pub const CONSISTENCY_MODEL_STOPS: f32 = 0.05;
+pub const CONSISTENCY_MODEL_STOPS: f32 = 0.1;
 
 const ROWS_PER_BAND: usize = 16;
 /// Peak of the 8-bit hat: the full weight.
