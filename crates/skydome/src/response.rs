@@ -977,7 +977,7 @@ pub struct CameraProfile {
     /// Optional: profiles written before it existed load without it, and the merge then
     /// estimates it from the bracket.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub noise: Option<crate::noise::NoiseModel>,
+    pub noise: Option<Box<crate::noise::NoiseModel>>,
 }
 
 impl CameraProfile {

@@ -478,7 +478,7 @@ pub fn run(
 
     p.at(Stage::Merging, 0.0)?;
     let profile_noise = match &options.response {
-        ResponseSource::Profile(prof) => prof.noise,
+        ResponseSource::Profile(prof) => prof.noise.as_deref().copied(),
         ResponseSource::Calibrate(_) => None,
     };
     let check = options.consistency || options.ghosts || options.products.consistency;
@@ -511,7 +511,7 @@ pub fn run(
         .is_some()
         .then(|| merged.inconsistent_fraction());
     let camera_profile = camera_profile.map(|mut prof| {
-        prof.noise = merged.noise.filter(|n| n.fitted).map(|n| n.model);
+        prof.noise = merged.noise.filter(|n| n.fitted).map(|n| Box::new(n.model));
         prof
     });
     let consistency = match (&merged.inconsistent, options.products.consistency) {
