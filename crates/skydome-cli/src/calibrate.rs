@@ -22,6 +22,10 @@ pub struct CalibArgs {
     /// Seed of the sample selection (same seed, same samples).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Code bands: split codes into N bands and add samples to every band the grid left with
+    /// too few observations, so both ends of the curve rest on data (0 = off).
+    #[arg(long, default_value_t = 16, value_name = "N")]
+    pub code_bands: usize,
     /// Smoothness weight λ of the second-derivative term.
     #[arg(long, default_value_t = CalibrateOptions::default().lambda)]
     pub lambda: f64,
@@ -71,6 +75,7 @@ impl CalibArgs {
                 samples: self.samples,
                 grid: self.grid,
                 seed: self.seed,
+                code_bands: self.code_bands,
                 ..SampleOptions::default()
             },
             Method::Seed => SampleOptions::seed_method(self.samples, self.grid, self.seed),
