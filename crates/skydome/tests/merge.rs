@@ -133,7 +133,7 @@ fn black_in_every_frame_takes_longest_exposure_and_stays_neutral() {
         }
     }
     let m = merge(&frames, &cal.response, &opts).unwrap();
-    let clip = m.clipped.unwrap();
+    let clip = m.clipped.clone().unwrap();
     let tl = frames.last().unwrap().exposure.relative().ln();
     // Neutral: every channel takes the smallest of the three channels' upper bounds from the
     // longest frame (the curves' toes differ, which used to tint such pixels).
