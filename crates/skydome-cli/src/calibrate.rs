@@ -165,6 +165,9 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         if let Some(w) = calibration.report().shortfall_warning() {
             io::warn(quiet, &w);
         }
+        if let Some(w) = calibration.report().range_warning() {
+            io::warn(quiet, &w);
+        }
         report.monotonic_fixes = Some(calibration.monotonic_fixes);
         if let Some(k) = a.repeat {
             let s = response::stability(&br.frames, a.calib.circle, &opts, k)
@@ -222,6 +225,11 @@ fn print_report(r: &Report) {
         crate::out(&format!(
             "samples: {} used of target {}{raised}; rejected {} clipped, {} edge, {} non-monotonic; grid {}x{}, seed {}",
             s.used, s.target, s.rejected_clipped, s.rejected_edge, s.rejected_non_monotonic, s.grid, s.grid, s.seed
+        ));
+        let cr = s.code_range;
+        crate::out(&format!(
+            "codes constrained by data: R {}..{}, G {}..{}, B {}..{} ({} samples added to fill code bands); outside them the curve is extrapolated",
+            cr[0][0], cr[0][1], cr[1][0], cr[1][1], cr[2][0], cr[2][1], s.band_samples
         ));
     }
     if let Some(f) = r.monotonic_fixes {

@@ -60,7 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut samples = 100usize;
     let mut lambda = CalibrateOptions::default().lambda;
     let mut edge = None;
-    let mut code_bands = 0usize;
+    let mut code_bands = skydome::sampling::SampleOptions::default().code_bands;
     let mut weighting = skydome::merge::Weighting::Hat;
     while let Some(a) = args.next() {
         let mut val = || args.next().ok_or(format!("{a} needs a value"));

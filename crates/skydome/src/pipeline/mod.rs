@@ -462,6 +462,7 @@ pub fn run(
         ResponseSource::Calibrate(o) => {
             let cal = response::calibrate(&br.frames, circle, o)?;
             warnings.extend(cal.report().shortfall_warning());
+            warnings.extend(cal.report().range_warning());
             let mut prof = cal.to_profile();
             describe_camera(&mut prof, &br);
             let report = cal.report().clone();
