@@ -19,7 +19,8 @@ then prints, for OpenCV, OpenCV's merge with skydome's curve, and skydome:
   least one frame, after fitting one scale per channel in the log domain (as skydome's
   `compare` with `per_channel_scale`): median and 95th-percentile relative error, log2 RMSE.
 
-`--json` prints the numbers as JSON instead of a table.
+`--json` prints the numbers as JSON instead of a table. `--zmin Z` starts the curve comparison
+at code Z instead of 10 (for a bracket with a black level b, where g below b is undefined: b + 4).
 """
 import json
 import os
@@ -42,8 +43,11 @@ def read_curves(path):
     return np.loadtxt(path, delimiter=",", skiprows=1)[:, 1:4]
 
 
+ZMIN = 10
+
+
 def curve_rmse_stops(g, g_true):
-    d = g[10:246] - g_true[10:246]
+    d = g[ZMIN:246] - g_true[ZMIN:246]
     d = d - d.mean(axis=0)
     return list(np.sqrt((d ** 2).mean(axis=0)) / np.log(2))
 
@@ -71,6 +75,12 @@ def main():
     if "--lambda" in args:
         i = args.index("--lambda")
         lam_arg = float(args[i + 1])
+        del args[i : i + 2]
+    if "--zmin" in args:
+        # Lowest code of the curve comparison (default 10); above a black level b, use b + 4.
+        global ZMIN
+        i = args.index("--zmin")
+        ZMIN = int(args[i + 1])
         del args[i : i + 2]
     if "--samples" in args:
         i = args.index("--samples")

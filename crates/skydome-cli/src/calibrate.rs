@@ -22,6 +22,10 @@ pub struct CalibArgs {
     /// Seed of the sample selection (same seed, same samples).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Code bands: split codes into N bands and add samples to every band the grid left with
+    /// too few observations, so both ends of the curve rest on data (0 = off).
+    #[arg(long, default_value_t = 16, value_name = "N")]
+    pub code_bands: usize,
     /// Smoothness weight λ of the second-derivative term.
     #[arg(long, default_value_t = CalibrateOptions::default().lambda)]
     pub lambda: f64,
@@ -71,6 +75,7 @@ impl CalibArgs {
                 samples: self.samples,
                 grid: self.grid,
                 seed: self.seed,
+                code_bands: self.code_bands,
                 ..SampleOptions::default()
             },
             Method::Seed => SampleOptions::seed_method(self.samples, self.grid, self.seed),
@@ -157,6 +162,12 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         calibration =
             response::calibrate(&br.frames, a.calib.circle, &opts).context("calibration failed")?;
         report.sampling = Some(calibration.report());
+        if let Some(w) = calibration.report().shortfall_warning() {
+            io::warn(quiet, &w);
+        }
+        if let Some(w) = calibration.report().range_warning() {
+            io::warn(quiet, &w);
+        }
         report.monotonic_fixes = Some(calibration.monotonic_fixes);
         if let Some(k) = a.repeat {
             let s = response::stability(&br.frames, a.calib.circle, &opts, k)
@@ -214,6 +225,11 @@ fn print_report(r: &Report) {
         crate::out(&format!(
             "samples: {} used of target {}{raised}; rejected {} clipped, {} edge, {} non-monotonic; grid {}x{}, seed {}",
             s.used, s.target, s.rejected_clipped, s.rejected_edge, s.rejected_non_monotonic, s.grid, s.grid, s.seed
+        ));
+        let cr = s.code_range;
+        crate::out(&format!(
+            "codes constrained by data: R {}..{}, G {}..{}, B {}..{} ({} samples added to fill code bands); outside them the curve is extrapolated",
+            cr[0][0], cr[0][1], cr[1][0], cr[1][1], cr[2][0], cr[2][1], s.band_samples
         ));
     }
     if let Some(f) = r.monotonic_fixes {

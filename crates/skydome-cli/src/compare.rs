@@ -57,7 +57,7 @@ pub fn run(a: Args) -> Result<()> {
         crate::out(&serde_json::to_string_pretty(&r)?);
     } else {
         crate::out(&format!(
-            "{} vs {} over {} pixels\nscale            {:.6} {:.6} {:.6}\nnormalised std   {:.5} (seed eq. 5)\nmedian rel error {:.3} %\np95 rel error    {:.3} %\nlog2 RMSE        {:.4} stops",
+            "{} vs {} over {} pixels\nscale            {:.6} {:.6} {:.6}\nnormalised std   {:.5} (seed eq. 5)\nseed's rho       {:.5} (std of min-max tone-mapped difference, seed 9.1)\nmedian rel error {:.3} %\np95 rel error    {:.3} %\nlog2 RMSE        {:.4} stops",
             a.a.display(),
             a.b.display(),
             r.pixels,
@@ -65,6 +65,7 @@ pub fn run(a: Args) -> Result<()> {
             r.scale[1],
             r.scale[2],
             r.normalised_std,
+            r.tonemapped_std,
             100.0 * r.median_rel_error,
             100.0 * r.p95_rel_error,
             r.log2_rmse

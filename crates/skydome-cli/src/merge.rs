@@ -36,7 +36,9 @@ pub struct Args {
     /// Also write the per-pixel confidence as a grey PNG (black = no frame well exposed).
     #[arg(long, value_name = "FILE.png")]
     pub confidence: Option<PathBuf>,
-    /// Frame weighting: `hat` (robust, default) or `none` (the seed's unweighted eq. 4).
+    /// Frame weighting: `hat` (robust, default), `noise` (inverse variance under a camera
+    /// noise model estimated from the bracket or read from the profile) or `none` (the seed's
+    /// unweighted eq. 4).
     #[arg(long, default_value = "hat", value_parser = parse_weighting)]
     pub weighting: Weighting,
     /// A spot-meter reading that makes the radiance absolute: the luminance in cd/m² of the
@@ -50,6 +52,21 @@ pub struct Args {
     /// (with --luminance too, the disagreement is reported). Needs a fish-eye lens.
     #[arg(long, value_name = "LUX")]
     pub illuminance: Option<f64>,
+    /// Black level of the frames, 8-bit code (e.g. 16 for a film scan): codes at or below
+    /// count as black.
+    #[arg(long, default_value_t = 0, value_name = "CODE")]
+    pub black_level: u8,
+    /// Align hand-held frames by translation (median threshold bitmaps) before merging.
+    #[arg(long)]
+    pub align: bool,
+    /// Ghost-aware merge: where frames disagree beyond their noise (moving clouds), take the
+    /// best-exposed frame alone.
+    #[arg(long)]
+    pub ghosts: bool,
+    /// Write where frames disagree beyond their noise as a PNG (white = disagree); the
+    /// fraction is always reported with it.
+    #[arg(long, value_name = "FILE.png")]
+    pub consistency: Option<PathBuf>,
     #[command(flatten)]
     pub bracket: BracketArgs,
     #[command(flatten)]
@@ -93,6 +110,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         a.exr.as_ref(),
         a.preview.as_ref(),
         a.confidence.as_ref(),
+        a.consistency.as_ref(),
     ]
     .into_iter()
     .flatten()
@@ -136,11 +154,16 @@ fn options(a: &Args) -> Result<Options> {
         response,
         calibration_circle: a.calib.circle,
         weighting: a.weighting,
+        black_level: a.black_level,
+        align: a.align,
+        consistency: a.consistency.is_some(),
+        ghosts: a.ghosts,
         lens: a.geometry.lens_source(a.calib.circle)?,
         sky: a.geometry.sky(),
         products: a.geometry.products(Products {
             preview: a.preview.is_some(),
             confidence: a.confidence.is_some(),
+            consistency: a.consistency.is_some(),
             ..Products::default()
         }),
         reference: Reference {
@@ -185,6 +208,7 @@ fn encode(a: &Args, dome: &Dome) -> Result<Outputs> {
     let pictures = [
         (&a.preview, &dome.preview),
         (&a.confidence, &dome.confidence),
+        (&a.consistency, &dome.consistency),
         (&a.geometry.overlay, &dome.overlay),
     ];
     for (path, img) in pictures {
@@ -255,6 +279,19 @@ fn print_summary(r: &Report, written: &[String]) {
             s += &format!("; the illuminance reading disagrees by {d:+.1} %");
         }
         crate::out(&s);
+    }
+    if let Some(al) = &r.alignment {
+        crate::out(&format!(
+            "aligned: shifts {:?} px (reference frame {})",
+            al.shifts,
+            al.reference + 1
+        ));
+    }
+    if let Some(f) = r.inconsistent_fraction {
+        crate::out(&format!(
+            "frames disagree beyond their noise at {:.2} % of the pixels",
+            100.0 * f
+        ));
     }
     for w in written {
         crate::out(&format!("wrote {w}"));

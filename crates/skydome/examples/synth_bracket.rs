@@ -3,6 +3,7 @@
 //! ```text
 //! cargo run -p skydome --example synth_bracket -- OUTDIR [--size 512] [--seed 1]
 //!     [--samples 100] [--lambda 30] [--edge 8] [--quality 92 | --png] [--full-well E] [--read-noise E] [--no-shot-noise]
+//!     [--evs -2,0,2] [--base-time S] [--black-level CODE] [--code-bands N] [--weighting hat|noise|none]
 //! ```
 //!
 //! Writes into `OUTDIR`:
@@ -59,6 +60,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut samples = 100usize;
     let mut lambda = CalibrateOptions::default().lambda;
     let mut edge = None;
+    let mut code_bands = skydome::sampling::SampleOptions::default().code_bands;
+    let mut weighting = skydome::merge::Weighting::Hat;
     while let Some(a) = args.next() {
         let mut val = || args.next().ok_or(format!("{a} needs a value"));
         match a.as_str() {
@@ -76,11 +79,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--full-well" => opts.full_well = val()?.parse()?,
             "--read-noise" => opts.read_noise = val()?.parse()?,
             "--no-shot-noise" => opts.shot_noise = false,
+            "--evs" => {
+                opts.evs = val()?
+                    .split(',')
+                    .map(|v| v.trim().parse())
+                    .collect::<Result<_, _>>()?
+            }
+            "--base-time" => opts.base_time_s = val()?.parse()?,
+            "--black-level" => opts.black_level = val()?.parse()?,
+            "--code-bands" => code_bands = val()?.parse()?,
+            "--weighting" => {
+                weighting = val()?
+                    .parse()
+                    .map_err(|e: skydome::UnknownName| e.to_string())?
+            }
             _ if out.is_none() && !a.starts_with("--") => out = Some(a),
             _ => return Err(format!("unknown argument {a}").into()),
         }
     }
-    let out = out.ok_or("usage: synth_bracket OUTDIR [--size N] [--seed S] [--samples N] [--lambda L] [--edge CODES] [--quality Q | --png] [--full-well E] [--read-noise E] [--no-shot-noise]")?;
+    let out = out.ok_or("usage: synth_bracket OUTDIR [--size N] [--seed S] [--samples N] [--lambda L] [--edge CODES] [--quality Q | --png] [--full-well E] [--read-noise E] [--no-shot-noise] [--evs A,B,..] [--base-time S] [--black-level CODE] [--code-bands N] [--weighting hat|noise|none]")?;
     let dir = Path::new(&out);
     std::fs::create_dir_all(dir)?;
     let b = generate(&opts)?;
@@ -105,8 +122,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(e) = edge {
         co.sampling.edge_threshold = e;
     }
+    co.sampling.code_bands = code_bands;
     let cal = calibrate(&b.frames, b.circle, &co)?;
-    let merged = merge(&b.frames, &cal.response, &MergeOptions::default())?;
+    let merged = merge(
+        &b.frames,
+        &cal.response,
+        &MergeOptions {
+            weighting,
+            black_level: opts.black_level.round() as u8,
+            ..MergeOptions::default()
+        },
+    )?;
     write_pfm(&dir.join("skydome_merged.pfm"), &merged.radiance)?;
     write_curves(&dir.join("skydome_curves.csv"), cal.response.curves())?;
     let mask = well_exposed_mask(&b.frames, 10, 245)?;

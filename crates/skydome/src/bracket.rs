@@ -883,11 +883,34 @@ pub fn assemble(
                 e2: describe(&a.exposure),
             });
         }
-        if nearly_identical(a, b) {
+    }
+    // Only informative values judge the frames: neither at the bracket's black level nor
+    // clipped. A frame with (almost) none — all black level or all white — adds nothing and is
+    // left out with a warning, as long as two frames remain.
+    let floor = black_floor(&frames);
+    let total = frames.len();
+    let mut kept = Vec::with_capacity(total);
+    for f in frames {
+        if informative_count(&f, floor) < informative_needed(&f) {
+            warnings.push(format!(
+                "{}: almost every pixel is at the black level or clipped, so the frame adds nothing to the bracket; it was left out",
+                f.name
+            ));
+        } else {
+            kept.push(f);
+        }
+    }
+    if kept.len() < 2 {
+        return Err(BracketError::TooFewFrames(kept.len()));
+    }
+    let frames = kept;
+    for pair in frames.windows(2) {
+        let (a, b) = (&pair[0], &pair[1]);
+        if nearly_identical(a, b, floor) {
             return Err(BracketError::IdenticalPixels {
                 file: b.name.clone(),
                 other: a.name.clone(),
-                stops,
+                stops: (b.exposure.relative() / a.exposure.relative()).log2(),
             });
         }
     }
@@ -982,19 +1005,67 @@ fn differing(
     }
 }
 
-/// True when two frames carry (nearly) the same picture: the mean brightness of the pixels that
-/// are unclipped in both differs by less than 2 %, and the mean absolute difference is below
-/// 1.5 % of full scale. Frames that genuinely differ by ≥ 1/6 stop differ by ≥ 12 % in linear
-/// terms, which even a strong tone curve does not squeeze below 2 %. Samples every 7th pixel.
-fn nearly_identical(a: &Frame, b: &Frame) -> bool {
+/// Values (full scale 1) at most this far above the bracket's black level count as black.
+const BLACK_MARGIN: f32 = 0.03;
+/// Values above this count as clipped.
+const CLIP_UNIT: f32 = 0.98;
+
+/// The bracket's black level on the unit scale: the 0.5th percentile of every 21st sample of
+/// every frame. 0 for most photos (a black housing or shadows); ≈ 16/255 for a film scan or a
+/// camera that lifts its blacks, where "black" pixels are not 0.
+fn black_floor(frames: &[Frame]) -> f32 {
+    let mut v: Vec<f32> = frames
+        .iter()
+        .flat_map(|f| (0..f.pixels.len()).step_by(21).map(|i| f.pixels.unit(i)))
+        .collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    let k = v.len() / 200;
+    v.select_nth_unstable_by(k, f32::total_cmp);
+    v[k]
+}
+
+/// Whether a unit value informs: above the black level by a margin and below clipping.
+#[inline]
+fn informative(v: f32, floor: f32) -> bool {
+    v > floor + BLACK_MARGIN && v < CLIP_UNIT
+}
+
+/// Informative values among every 21st sample of a frame.
+fn informative_count(f: &Frame, floor: f32) -> usize {
+    (0..f.pixels.len())
+        .step_by(21)
+        .filter(|&i| informative(f.pixels.unit(i), floor))
+        .count()
+}
+
+/// A frame with fewer informative samples (of every 21st) than this adds nothing: 0.05 % of
+/// them, and at least 10; a frame too small to judge (under 100 such samples) needs none.
+fn informative_needed(f: &Frame) -> usize {
+    let sampled = f.pixels.len().div_ceil(21);
+    if sampled < 100 {
+        0
+    } else {
+        sampled / 2000 + 10
+    }
+}
+
+/// True when two frames carry (nearly) the same picture: over the values informative in both
+/// (neither at the black level nor clipped), the mean brightness differs by less than 2 % and
+/// the mean absolute difference is below 1.5 % of full scale. Frames that genuinely differ by
+/// ≥ 1/6 stop differ by ≥ 12 % in linear terms, which even a strong tone curve does not squeeze
+/// below 2 %. Judging only informative values matters: a mostly black frame (a film scan's
+/// black level, a short exposure at night) is identical to its neighbour *where both are
+/// black*, which says nothing about the exposure. Samples every 7th pixel.
+fn nearly_identical(a: &Frame, b: &Frame, floor: f32) -> bool {
     let n = a.pixels.len().min(b.pixels.len());
     let (mut sa, mut sb, mut sad, mut count) = (0f64, 0f64, 0f64, 0usize);
     let mut i = 0;
     while i + 2 < n {
         for c in 0..3 {
             let (va, vb) = (a.pixels.unit(i + c), b.pixels.unit(i + c));
-            let clipped = |v: f32| !(0.02..=0.98).contains(&v);
-            if clipped(va) && clipped(vb) {
+            if !(informative(va, floor) && informative(vb, floor)) {
                 continue;
             }
             sa += f64::from(va);
@@ -1105,6 +1176,61 @@ mod tests {
         let b = frame("b", 16, 16, |i| (i % 180) as u8 + 30, 0.04);
         let e = assemble(vec![a, b], None, OrientationPolicy::Apply).unwrap_err();
         assert!(matches!(e, BracketError::IdenticalPixels { .. }), "{e}");
+    }
+
+    /// A film-scan-like pair: 95 % of the frame at the black level (code 16 ± 1), the rest a
+    /// gradient one stop apart (through a gamma of 2.2).
+    fn film_pair(t0: f64) -> (DecodedFrame, DecodedFrame) {
+        let w = 64;
+        let code = |i: usize, t: f64| -> u8 {
+            let p = i / 3;
+            if p % 100 < 95 {
+                (15 + (i * 7 % 3)) as u8
+            } else {
+                let e = 0.05 + 0.4 * (p % 64) as f64 / 64.0;
+                (16.0 + 224.0 * (e * t / t0).powf(1.0 / 2.2)).min(255.0) as u8
+            }
+        };
+        (
+            frame("short", w, w, move |i| code(i, t0), t0),
+            frame("long", w, w, move |i| code(i, 2.0 * t0), 2.0 * t0),
+        )
+    }
+
+    #[test]
+    fn mostly_black_level_frames_one_stop_apart_are_accepted() {
+        let (a, b) = film_pair(1.0 / 1024.0);
+        let br = assemble(vec![a, b], None, OrientationPolicy::Apply).unwrap();
+        assert_eq!(br.frames.len(), 2);
+    }
+
+    #[test]
+    fn ignored_bracket_is_still_refused_at_a_black_level() {
+        let (a, _) = film_pair(1.0 / 1024.0);
+        let mut b = a.clone();
+        b.name = "long".into();
+        b.exif_time_s = Some(2.0 / 1024.0);
+        let e = assemble(vec![a, b], None, OrientationPolicy::Apply).unwrap_err();
+        assert!(matches!(e, BracketError::IdenticalPixels { .. }), "{e}");
+    }
+
+    #[test]
+    fn a_frame_with_nothing_above_the_black_level_is_left_out_with_a_warning() {
+        let (a, b) = film_pair(1.0 / 256.0);
+        let dark = frame("dark", 64, 64, |i| (15 + (i * 7 % 3)) as u8, 1.0 / 4096.0);
+        let br = assemble(vec![a, b, dark], None, OrientationPolicy::Apply).unwrap();
+        let names: Vec<_> = br.frames.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(names, ["short", "long"]);
+        assert!(br
+            .warnings
+            .iter()
+            .any(|w| w.contains("dark") && w.contains("left out")));
+        // Two black frames and one good one: too short once the black ones are out.
+        let (a, _) = film_pair(1.0 / 256.0);
+        let d1 = frame("d1", 64, 64, |_| 0, 1.0 / 4096.0);
+        let d2 = frame("d2", 64, 64, |_| 0, 1.0 / 8192.0);
+        let e = assemble(vec![a, d1, d2], None, OrientationPolicy::Apply).unwrap_err();
+        assert_eq!(e, BracketError::TooFewFrames(1));
     }
 
     #[test]

@@ -13,6 +13,11 @@
 //!    included values, `a' = a_c / mean(a_c)`, `b' = b_c / mean(b_c)`, and the result is the
 //!    (population) standard deviation of `a' − b'` over all included values. It needs no scale
 //!    fit, but is dominated by the brightest pixels.
+//! 5. **The seed's ρ (§9.1)**: each image is tone-mapped by the seed's per-channel min–max
+//!    operator, `(v − min_c) / (max_c − min_c)` over the included values (so both lie in
+//!    `[0, 1]`), and ρ is the (population) standard deviation of the per-value difference. This
+//!    is the number the seed reports (0.011–0.016 for its merges); eq. 5 above is not bounded
+//!    and gives values like 17 on a sky with a sun.
 //!
 //! [`well_exposed_mask`] gives the usual mask: pixels seen well exposed in at least one frame.
 
@@ -47,6 +52,8 @@ pub struct CompareReport {
     pub scale: [f64; 3],
     /// The seed's eq. 5: std of the difference of mean-normalised images.
     pub normalised_std: f64,
+    /// The seed's ρ: std of the difference of the two min–max tone-mapped images in `[0, 1]`.
+    pub tonemapped_std: f64,
     /// Median relative error after scaling.
     pub median_rel_error: f64,
     /// 95th-percentile relative error after scaling.
@@ -122,10 +129,33 @@ pub fn compare(
     rel.sort_by(f64::total_cmp);
     let pct = |q: f64| rel[((q * m).ceil() as usize).clamp(1, rel.len()) - 1];
     let dm = d1 / m;
+    // The seed's min–max operator per channel, then the std of the difference.
+    let range = |img: &HdrImage, c: usize| {
+        used.iter()
+            .map(|&p| img.data[3 * p + c] as f64)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            })
+    };
+    let (ra, rb) = (
+        [0, 1, 2].map(|c| range(a, c)),
+        [0, 1, 2].map(|c| range(b, c)),
+    );
+    let unit = |v: f64, (lo, hi): (f64, f64)| if hi > lo { (v - lo) / (hi - lo) } else { 0.0 };
+    let (mut t1, mut t2) = (0.0f64, 0.0f64);
+    for &p in &used {
+        for c in 0..3 {
+            let d = unit(a.data[3 * p + c] as f64, ra[c]) - unit(b.data[3 * p + c] as f64, rb[c]);
+            t1 += d;
+            t2 += d * d;
+        }
+    }
+    let tm = t1 / m;
     Ok(CompareReport {
         pixels: used.len(),
         scale,
         normalised_std: (d2 / m - dm * dm).max(0.0).sqrt(),
+        tonemapped_std: (t2 / m - tm * tm).max(0.0).sqrt(),
         median_rel_error: pct(0.5),
         p95_rel_error: pct(0.95),
         log2_rmse: (l2 / m).sqrt(),
@@ -175,8 +205,29 @@ mod tests {
         let a = img(&b.data.iter().map(|v| v * 7.5).collect::<Vec<_>>());
         let r = compare(&a, &b, None, &CompareOptions::default()).unwrap();
         assert!(r.log2_rmse < 1e-6 && r.median_rel_error < 1e-6 && r.normalised_std < 1e-6);
+        assert!(r.tonemapped_std < 1e-7);
         assert!((r.scale[0] - 1.0 / 7.5).abs() < 1e-6);
         assert_eq!(r.pixels, 2);
+    }
+
+    #[test]
+    fn seeds_rho_is_the_std_of_min_max_tonemapped_differences() {
+        // a equals b except one red value, 3 instead of 2; both reds span 0.5..4 over the
+        // used pixels, so that value differs by 1/3.5 after min–max and the other eight by 0.
+        let b = img(&[0.5, 0.5, 0.5, 4.0, 4.0, 4.0, 2.0, 2.0, 2.0, 0.0, 0.0, 0.0]);
+        let mut a = b.clone();
+        a.data[6] = 3.0;
+        let r = compare(&a, &b, None, &CompareOptions::default());
+        // The all-zero pixel is excluded (not positive): three pixels, nine values.
+        let r = r.unwrap();
+        let d: f64 = 1.0 / 3.5;
+        let want = (d * d / 9.0 - (d / 9.0).powi(2)).sqrt();
+        assert!(
+            (r.tonemapped_std - want).abs() < 1e-9,
+            "{} vs {want}",
+            r.tonemapped_std
+        );
+        assert!(r.tonemapped_std < 1.0);
     }
 
     #[test]

@@ -46,12 +46,14 @@
 //! The crate has no command-line or filesystem-walking dependencies and builds for
 //! `wasm32-unknown-unknown`.
 
+pub mod align;
 pub mod bracket;
 pub mod compare;
 pub mod fisheye;
 pub mod formats;
 pub mod image;
 pub mod merge;
+pub mod noise;
 pub mod overlay;
 pub mod photometry;
 pub mod pipeline;

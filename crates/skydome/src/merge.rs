@@ -46,6 +46,7 @@
 
 use crate::bracket::{Frame, Pixels};
 use crate::image::HdrImage;
+use crate::noise::{self, NoiseEstimate, NoiseModel};
 pub use crate::response::Weighting;
 use crate::response::{Response, LEVELS};
 
@@ -55,12 +56,33 @@ pub const CLIPPED_HIGH: u8 = 1;
 /// [`Merged::clipped`] bit: the pixel is black in every frame in some channel; its value is the
 /// longest frame's upper bound.
 pub const CLIPPED_LOW: u8 = 2;
+/// [`Merged::clipped`] bit (always with [`CLIPPED_LOW`]): every channel is at or below the black
+/// level in every frame. Such a pixel carries no colour, so all three channels get the same
+/// value — the smallest of the three channels' upper bounds from the longest frame, the
+/// tightest bound that is neutral — instead of the coloured fog the curves' extrapolated toes
+/// would give.
+pub const BLACK: u8 = 4;
+/// [`Merged::warnings`] speaks up when more than this fraction of the tested pixels disagree
+/// between frames beyond their noise.
+pub const INCONSISTENT_WARN_FRACTION: f64 = 0.02;
+/// [`Merged::warnings`] speaks up when more than this fraction of the area is black in every
+/// frame.
+pub const BLACK_WARN_FRACTION: f64 = 0.001;
+/// The consistency test flags a vote more than this many standard deviations from the
+/// best-exposed frame's.
+pub const CONSISTENCY_SIGMAS: f32 = 4.0;
+/// Standard deviation (stops) added to every vote in the consistency test for what the noise
+/// model does not describe: the calibrated curve's own error, sub-pixel misregistration.
+pub const CONSISTENCY_MODEL_STOPS: f32 = 0.1;
 
 const ROWS_PER_BAND: usize = 16;
 /// Peak of the 8-bit hat: the full weight.
 const W_MAX: f32 = 127.0;
 /// Floor weight of the shortest frame: keeps `Σ w > 0` without moving any real result.
 const W_FLOOR: f32 = 1e-6;
+/// Floor weight of the longest frame at codes below mid-grey under [`Weighting::Noise`]: a pixel
+/// black in every frame takes the longest frame's value (the tightest upper bound).
+const W_FLOOR_LONG: f32 = 1e-4;
 
 /// Errors from merging; each message says what to change.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -107,6 +129,25 @@ pub struct MergeOptions {
     pub confidence: bool,
     /// Also return the per-pixel clipped mask.
     pub clipped_mask: bool,
+    /// Noise model for [`Weighting::Noise`] and the consistency test (e.g. from a camera
+    /// profile); `None` estimates it from the bracket ([`noise::estimate`]).
+    #[serde(default)]
+    pub noise: Option<NoiseModel>,
+    /// Black level, 8-bit code: a code at or below it counts as black (no weight under
+    /// [`Weighting::Noise`]; a pixel black in every frame is flagged and kept neutral). 0 by
+    /// default; a film scan or a camera that lifts its blacks has ≈ 16.
+    #[serde(default)]
+    pub black_level: u8,
+    /// Run the per-pixel consistency test: flag pixels where some frame's vote differs from the
+    /// best-exposed frame's by more than [`CONSISTENCY_SIGMAS`] standard deviations of the
+    /// noise model (moving clouds, a shifted hand-held frame). Fills
+    /// [`Merged::inconsistent`] and its counts.
+    #[serde(default)]
+    pub consistency: bool,
+    /// Ghost-aware merge (implies `consistency`): where frames disagree, take the best-exposed
+    /// frame alone instead of a blend of two scenes.
+    #[serde(default)]
+    pub ghosts: bool,
 }
 
 /// A merged radiance map.
@@ -125,6 +166,69 @@ pub struct Merged {
     pub clipped_high: usize,
     /// Number of pixels flagged [`CLIPPED_LOW`] (always counted).
     pub clipped_low: usize,
+    /// Number of pixels flagged [`BLACK`]: every channel black in every frame, kept neutral
+    /// (always counted).
+    pub black_pixels: usize,
+    /// The noise model used, when the weighting or the consistency test needed one.
+    pub noise: Option<NoiseEstimate>,
+    /// Per pixel (row-major): 1 where the frames disagree beyond their noise, else 0. Present
+    /// when the consistency test ran.
+    pub inconsistent: Option<Vec<u8>>,
+    /// Pixels the consistency test flagged.
+    pub inconsistent_pixels: usize,
+    /// Pixels the consistency test could judge (at least two usable frames in some channel).
+    pub tested_pixels: usize,
+}
+
+impl Merged {
+    /// Fraction of the tested pixels flagged inconsistent (0 when the test did not run).
+    pub fn inconsistent_fraction(&self) -> f64 {
+        if self.tested_pixels == 0 {
+            0.0
+        } else {
+            self.inconsistent_pixels as f64 / self.tested_pixels as f64
+        }
+    }
+
+    /// Things the user should know about this merge, one plain sentence each. `area` (row-major,
+    /// one entry per pixel), when given, is the part of the image that matters — a fish-eye's
+    /// image circle, whose black housing is otherwise counted as black pixels; it needs the
+    /// clipped mask ([`MergeOptions::clipped_mask`]) to take effect.
+    pub fn warnings(&self, area: Option<&[bool]>) -> Vec<String> {
+        let mut w = Vec::new();
+        let np = self.radiance.width * self.radiance.height;
+        let (black, total) = match (area, &self.clipped) {
+            (Some(a), Some(m)) if a.len() == m.len() => (
+                m.iter()
+                    .zip(a)
+                    .filter(|(&f, &inside)| inside && f & BLACK != 0)
+                    .count(),
+                a.iter().filter(|&&v| v).count(),
+            ),
+            _ => (self.black_pixels, np),
+        };
+        if total > 0 && black as f64 > BLACK_WARN_FRACTION * total as f64 {
+            w.push(format!(
+                "{:.2} % of the image ({black} pixels) is black in every frame: its radiance is only an upper bound, shown neutral; add a longer exposure to see into the shadows",
+                100.0 * black as f64 / total as f64
+            ));
+        }
+        if let Some(n) = &self.noise {
+            if !n.fitted {
+                w.push(
+                    "the camera noise model could not be estimated from this bracket (too few pixels well exposed in two frames): a typical phone sensor was assumed for the weights".into(),
+                );
+            }
+        }
+        if self.inconsistent.is_some() && self.inconsistent_fraction() > INCONSISTENT_WARN_FRACTION
+        {
+            w.push(format!(
+                "{:.1} % of the pixels differ between frames beyond their noise (moving clouds or people, or a hand-held camera): align the frames or use the ghost-aware merge",
+                100.0 * self.inconsistent_fraction()
+            ));
+        }
+        w
+    }
 }
 
 /// Merges `frames` (sorted shortest exposure first, same size and bit depth) through `response`.
@@ -143,6 +247,11 @@ pub fn merge(
         clipped: None,
         clipped_high: 0,
         clipped_low: 0,
+        black_pixels: 0,
+        noise: None,
+        inconsistent: None,
+        inconsistent_pixels: 0,
+        tested_pixels: 0,
     };
     merge_into(frames, response, opts, &mut m)?;
     Ok(m)
@@ -189,6 +298,36 @@ pub fn merge_into(
         prev = t;
         lt.push(t.ln());
     }
+    let check = opts.consistency || opts.ghosts;
+    let noise_est = (opts.weighting == Weighting::Noise || check).then(|| match opts.noise {
+        Some(model) if model.is_valid() => NoiseEstimate {
+            model,
+            differences: 0,
+            bins: 0,
+            fitted: true,
+        },
+        _ => noise::estimate(frames, response, opts.black_level, None),
+    });
+    let noise_w: Option<[[f64; LEVELS]; 3]> = noise_est
+        .as_ref()
+        .map(|e| [0, 1, 2].map(|c| e.model.weights(response, c, opts.black_level)));
+    let p = frames.len();
+    let weighting = opts.weighting;
+    let wfn = |j: usize, c: usize, z: f32| -> f32 {
+        match (weighting, &noise_w) {
+            (Weighting::Noise, Some(nw)) => {
+                let mut w = interp(&nw[c], z) as f32;
+                if j == 0 {
+                    w = w.max(W_FLOOR);
+                }
+                if j + 1 == p && z <= 127.5 {
+                    w = w.max(W_FLOOR_LONG);
+                }
+                w
+            }
+            _ => weight(z, j, p, weighting),
+        }
+    };
     out.radiance.width = w;
     out.radiance.height = h;
     let data = sized(&mut out.radiance.data, n);
@@ -208,7 +347,13 @@ pub fn merge_into(
             &mut []
         }
     };
-    let (clipped_high, clipped_low) = match bits {
+    let mut flags = if check { vec![0u8; w * h] } else { Vec::new() };
+    // A 16-bit value bins to an 8-bit code ≤ b below `257·b + 128`; code 0 means exactly 0.
+    let black16 = match opts.black_level {
+        0 => 0,
+        b => (b as u32 * 257 + 128).min(65535) as u16,
+    };
+    let (counts, tested, flagged) = match bits {
         16 => {
             let srcs: Vec<&[u16]> = frames
                 .iter()
@@ -217,8 +362,17 @@ pub fn merge_into(
                     Pixels::U8(_) => None,
                 })
                 .collect();
-            let luts = Tables::<65536>::new(&lt, opts.weighting, |c, v| response.g16(c, v as u16));
-            run_bands(&srcs, &luts, w, data, conf, clip)
+            let g = |c: usize, v: usize| response.g16(c, v as u16);
+            let luts = Tables::<65536>::new(&lt, wfn, g);
+            let counts = run_bands(&srcs, &luts, w, black16, data, conf, clip);
+            let (t, f) = match &noise_est {
+                Some(e) if check => {
+                    let votes = Votes::<65536>::new(&lt, response, &e.model, opts.black_level, g);
+                    consistency(&srcs, &votes, w, data, &mut flags, opts.ghosts)
+                }
+                _ => (0, 0),
+            };
+            (counts, t, f)
         }
         _ => {
             let srcs: Vec<&[u8]> = frames
@@ -228,13 +382,177 @@ pub fn merge_into(
                     Pixels::U16(_) => None,
                 })
                 .collect();
-            let luts = Tables::<LEVELS>::new(&lt, opts.weighting, |c, z| response.curve(c)[z]);
-            run_bands(&srcs, &luts, w, data, conf, clip)
+            let g = |c: usize, z: usize| response.curve(c)[z];
+            let luts = Tables::<LEVELS>::new(&lt, wfn, g);
+            let counts = run_bands(&srcs, &luts, w, opts.black_level, data, conf, clip);
+            let (t, f) = match &noise_est {
+                Some(e) if check => {
+                    let votes = Votes::<LEVELS>::new(&lt, response, &e.model, opts.black_level, g);
+                    consistency(&srcs, &votes, w, data, &mut flags, opts.ghosts)
+                }
+                _ => (0, 0),
+            };
+            (counts, t, f)
         }
     };
-    out.clipped_high = clipped_high;
-    out.clipped_low = clipped_low;
+    (out.clipped_high, out.clipped_low, out.black_pixels) = counts;
+    out.noise = noise_est;
+    out.tested_pixels = tested;
+    out.inconsistent_pixels = flagged;
+    out.inconsistent = check.then_some(flags);
     Ok(())
+}
+
+/// Linear interpolation of a 256-entry table at a continuous code.
+#[inline]
+fn interp(t: &[f64; LEVELS], z: f32) -> f64 {
+    let z = (z as f64).clamp(0.0, 255.0);
+    let z0 = (z.floor() as usize).min(LEVELS - 2);
+    let f = z - z0 as f64;
+    t[z0] * (1.0 - f) + t[z0 + 1] * f
+}
+
+/// Per frame, channel and code: the vote `log2 E_j` and its standard deviation in stops
+/// (infinite where the code is unusable: black, 255, or faded out), for the consistency test.
+struct Votes<const N: usize> {
+    /// Frame-major, then channel, then code: `[vote, sd]`.
+    flat: Vec<[f32; 2]>,
+}
+
+impl<const N: usize> Votes<N> {
+    fn new(
+        lt: &[f64],
+        response: &Response,
+        model: &NoiseModel,
+        black: u8,
+        g: impl Fn(usize, usize) -> f64,
+    ) -> Self {
+        let scale = 255.0 / (N - 1) as f32;
+        let l2 = std::f64::consts::LOG2_E;
+        let mut sd8 = [[f64::INFINITY; LEVELS]; 3];
+        for (c, sd) in sd8.iter_mut().enumerate() {
+            for (z, v) in sd.iter_mut().enumerate() {
+                if z <= black as usize || z == LEVELS - 1 {
+                    continue;
+                }
+                let fade = ((255.0 - z as f64) / noise::TOP_FADE).min(1.0);
+                let var = model.log_variance(response, c, z) / fade;
+                let m = CONSISTENCY_MODEL_STOPS as f64;
+                *v = (var * l2 * l2 + m * m).sqrt();
+            }
+        }
+        let mut flat = Vec::with_capacity(lt.len() * 3 * N);
+        for &l in lt {
+            for (c, sd) in sd8.iter().enumerate() {
+                flat.extend((0..N).map(|v| {
+                    let z = v as f32 * scale;
+                    // The nearer 8-bit code's deviation (a 16-bit value between two codes has
+                    // the noise of either).
+                    let s = sd[(z.round() as usize).min(LEVELS - 1)];
+                    [((g(c, v) - l) * l2) as f32, s as f32]
+                }));
+            }
+        }
+        Self { flat }
+    }
+
+    #[inline(always)]
+    fn get(&self, j: usize, c: usize, v: usize) -> [f32; 2] {
+        self.flat[(j * 3 + c) * N + v]
+    }
+}
+
+/// The consistency test (and the ghost-aware replacement) over all pixels; returns the tested
+/// and flagged pixel counts. `flags` gets 1 per flagged pixel.
+fn consistency<T: Code, const N: usize>(
+    srcs: &[&[T]],
+    votes: &Votes<N>,
+    w: usize,
+    out: &mut [f32],
+    flags: &mut [u8],
+    ghosts: bool,
+) -> (usize, usize) {
+    let rows = ROWS_PER_BAND;
+    let work = |(k, (o, f)): (usize, (&mut [f32], &mut [u8]))| {
+        let start = k * rows * w;
+        consistency_band(srcs, votes, start, o, f, ghosts)
+    };
+    let add = |a: (usize, usize), b: (usize, usize)| (a.0 + b.0, a.1 + b.1);
+    let chunks = out
+        .chunks_mut((3 * rows * w).max(1))
+        .zip(flags.chunks_mut((rows * w).max(1)));
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        let jobs: Vec<_> = chunks.enumerate().collect();
+        jobs.into_par_iter().map(work).reduce(|| (0, 0), add)
+    }
+    #[cfg(not(feature = "parallel"))]
+    chunks.enumerate().map(work).fold((0, 0), add)
+}
+
+fn consistency_band<T: Code, const N: usize>(
+    srcs: &[&[T]],
+    votes: &Votes<N>,
+    start: usize,
+    out: &mut [f32],
+    flags: &mut [u8],
+    ghosts: bool,
+) -> (usize, usize) {
+    let p = srcs.len();
+    let (mut tested, mut flagged) = (0usize, 0usize);
+    let mut v = vec![[[0f32; 2]; 3]; p];
+    for (k, (o, fl)) in out.chunks_exact_mut(3).zip(flags.iter_mut()).enumerate() {
+        let i = 3 * (start + k);
+        // Best-exposed frame: largest total precision over the three channels.
+        let (mut best, mut best_prec) = (usize::MAX, 0f32);
+        let mut usable = [0u8; 3];
+        for (j, vj) in v.iter_mut().enumerate() {
+            let mut prec = 0f32;
+            for c in 0..3 {
+                vj[c] = votes.get(j, c, srcs[j][i + c].index());
+                if vj[c][1].is_finite() {
+                    prec += 1.0 / (vj[c][1] * vj[c][1]);
+                    usable[c] += 1;
+                }
+            }
+            if prec > best_prec {
+                best_prec = prec;
+                best = j;
+            }
+        }
+        if best == usize::MAX || usable.iter().all(|&u| u < 2) {
+            *fl = 0;
+            continue;
+        }
+        tested += 1;
+        let vb = v[best];
+        let mut bad = false;
+        for (j, vj) in v.iter().enumerate() {
+            if j == best {
+                continue;
+            }
+            for c in 0..3 {
+                let (a, b) = (vj[c], vb[c]);
+                if a[1].is_finite() && b[1].is_finite() {
+                    let lim = CONSISTENCY_SIGMAS * (a[1] * a[1] + b[1] * b[1]).sqrt();
+                    bad |= (a[0] - b[0]).abs() > lim;
+                }
+            }
+        }
+        *fl = bad as u8;
+        if bad {
+            flagged += 1;
+            if ghosts {
+                for c in 0..3 {
+                    if vb[c][1].is_finite() {
+                        o[c] = fast_exp2(vb[c][0]);
+                    }
+                }
+            }
+        }
+    }
+    (tested, flagged)
 }
 
 /// `v` with exactly `n` elements, for the merge to overwrite. A buffer of another size is
@@ -256,7 +574,8 @@ fn hat_f(z: f32) -> f32 {
 fn weight(z: f32, j: usize, p: usize, weighting: Weighting) -> f32 {
     match weighting {
         Weighting::None => 1.0,
-        Weighting::Hat => {
+        // Without a noise model (never reached from `merge_into`, which builds one) the hat.
+        Weighting::Hat | Weighting::Noise => {
             let mut w = hat_f(z);
             if j == 0 && z >= 127.5 {
                 w = W_MAX;
@@ -281,16 +600,21 @@ struct Tables<const N: usize> {
 }
 
 impl<const N: usize> Tables<N> {
-    /// `g(c, code)` gives `g` (natural log) for a code of an `N`-level input; codes map to the
-    /// 8-bit scale as `code · 255 / (N − 1)`.
-    fn new(lt: &[f64], weighting: Weighting, g: impl Fn(usize, usize) -> f64) -> Self {
+    /// `g(c, code)` gives `g` (natural log) for a code of an `N`-level input and
+    /// `weight(j, c, z)` the weight of frame `j`, channel `c` at the continuous 8-bit code `z`;
+    /// codes map to the 8-bit scale as `code · 255 / (N − 1)`.
+    fn new(
+        lt: &[f64],
+        weight: impl Fn(usize, usize, f32) -> f32,
+        g: impl Fn(usize, usize) -> f64,
+    ) -> Self {
         let p = lt.len();
         let scale = 255.0 / (N - 1) as f32;
         let mut flat = Vec::with_capacity(p * 3 * N);
         for (j, &l) in lt.iter().enumerate() {
             for c in 0..3 {
                 flat.extend((0..N).map(|v| {
-                    let w = weight(v as f32 * scale, j, p, weighting);
+                    let w = weight(j, c, v as f32 * scale);
                     [w, w * ((g(c, v) - l) * std::f64::consts::LOG2_E) as f32]
                 }));
             }
@@ -311,11 +635,9 @@ impl<const N: usize> Tables<N> {
 }
 
 /// An input sample type: its table index and the code of a clipped (saturated) sample.
-trait Code: Copy + Sync + PartialEq {
+trait Code: Copy + Sync + PartialOrd {
     /// Highest code (`2^bits − 1`).
     const MAX: Self;
-    /// Lowest code.
-    const ZERO: Self;
     /// The hat weight in this type's units, [`HAT_PEAK`](Code::HAT_PEAK) at mid-grey.
     const HAT_PEAK: u32;
     /// Table index.
@@ -326,7 +648,6 @@ trait Code: Copy + Sync + PartialEq {
 
 impl Code for u8 {
     const MAX: u8 = u8::MAX;
-    const ZERO: u8 = 0;
     const HAT_PEAK: u32 = 127;
     #[inline(always)]
     fn index(self) -> usize {
@@ -340,7 +661,6 @@ impl Code for u8 {
 
 impl Code for u16 {
     const MAX: u16 = u16::MAX;
-    const ZERO: u16 = 0;
     const HAT_PEAK: u32 = 127 * 257;
     #[inline(always)]
     fn index(self) -> usize {
@@ -355,16 +675,18 @@ impl Code for u16 {
 /// One band of work: offset of its first sample, its output, confidence and mask slices.
 type Band<'a> = (usize, &'a mut [f32], &'a mut [f32], &'a mut [u8]);
 
-/// Merges all bands (in parallel with the `parallel` feature); returns the clipped-high and
-/// clipped-low pixel counts. `conf` and `clip` are empty when not asked for.
+/// Merges all bands (in parallel with the `parallel` feature); returns the clipped-high,
+/// clipped-low and black pixel counts. `conf` and `clip` are empty when not asked for; a code
+/// at or below `black` counts as black.
 fn run_bands<T: Code, const N: usize>(
     srcs: &[&[T]],
     luts: &Tables<N>,
     w: usize,
+    black: T,
     out: &mut [f32],
     conf: &mut [f32],
     clip: &mut [u8],
-) -> (usize, usize) {
+) -> (usize, usize, usize) {
     let band = ROWS_PER_BAND * 3 * w;
     let pband = ROWS_PER_BAND * w;
     let bands = out.len().div_ceil(band.max(1));
@@ -383,15 +705,16 @@ fn run_bands<T: Code, const N: usize>(
         })
         .collect();
     debug_assert_eq!(jobs.len(), bands);
-    let work = |(off, o, c, m): Band<'_>| merge_band(srcs, luts, w, off, o, c, m);
-    let add = |a: (usize, usize), b: (usize, usize)| (a.0 + b.0, a.1 + b.1);
+    let work = |(off, o, c, m): Band<'_>| merge_band(srcs, luts, w, black, off, o, c, m);
+    let add =
+        |a: (usize, usize, usize), b: (usize, usize, usize)| (a.0 + b.0, a.1 + b.1, a.2 + b.2);
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
-        jobs.into_par_iter().map(work).reduce(|| (0, 0), add)
+        jobs.into_par_iter().map(work).reduce(|| (0, 0, 0), add)
     }
     #[cfg(not(feature = "parallel"))]
-    jobs.into_iter().map(work).fold((0, 0), add)
+    jobs.into_iter().map(work).fold((0, 0, 0), add)
 }
 
 /// How a group of frames contributes to a row: the only group writes the mean
@@ -513,18 +836,19 @@ fn merge_band<T: Code, const N: usize>(
     srcs: &[&[T]],
     luts: &Tables<N>,
     w: usize,
+    black: T,
     off: usize,
     out: &mut [f32],
     conf: &mut [f32],
     clip: &mut [u8],
-) -> (usize, usize) {
+) -> (usize, usize, usize) {
     const GROUP: usize = 3;
     let row = 3 * w;
     let mut den = vec![0f32; if srcs.len() > GROUP { row } else { 0 }];
     let mut hs = vec![0u32; if conf.is_empty() { 0 } else { row }];
     let mut ext = vec![0u8; row];
     let mut rows: Vec<&[T]> = Vec::with_capacity(srcs.len());
-    let (mut high, mut low) = (0usize, 0usize);
+    let (mut high, mut low, mut blk) = (0usize, 0usize, 0usize);
     for (r, orow) in out.chunks_mut(row).enumerate() {
         let start = off + r * row;
         rows.clear();
@@ -542,17 +866,17 @@ fn merge_band<T: Code, const N: usize>(
         }
         finish_row(orow, &den);
 
-        // Clipped pixels: some channel is 0 or full scale in every frame. Branch-free byte
+        // Clipped pixels: some channel is black or full scale in every frame. Branch-free byte
         // passes over the row that vectorise: `ext` gets each sample's flag (CLIPPED_HIGH when
         // the shortest frame is saturated, else CLIPPED_LOW), then the flags are ORed per
         // pixel where there are any (fish-eye frames have black corners in most rows).
         for (e, &z0) in ext.iter_mut().zip(rows[0].iter()) {
-            let extreme = (z0 == T::ZERO || z0 == T::MAX) as u8;
+            let extreme = (z0 <= black || z0 == T::MAX) as u8;
             *e = extreme * (CLIPPED_LOW - (z0 == T::MAX) as u8);
         }
         for s in &rows[1..] {
             for (e, &z) in ext.iter_mut().zip(s.iter()) {
-                *e *= (z == T::ZERO || z == T::MAX) as u8;
+                *e *= (z <= black || z == T::MAX) as u8;
             }
         }
         let prow = r * w;
@@ -561,9 +885,10 @@ fn merge_band<T: Code, const N: usize>(
         } else {
             Some(&mut clip[prow..prow + w])
         };
-        let (h, l) = pixel_flags(&ext, mask);
+        let (h, l, b) = pixel_flags(&ext, mask, orow);
         high += h;
         low += l;
+        blk += b;
 
         if !conf.is_empty() {
             // Integer hat sums (`min(v, max − v)`, exact and vectorisable), then per pixel the
@@ -579,15 +904,16 @@ fn merge_band<T: Code, const N: usize>(
             }
         }
     }
-    (high, low)
+    (high, low, blk)
 }
 
-/// ORs a row's per-sample clip flags (`ext`, 3 per pixel) per pixel into `mask` (when given);
-/// returns the number of pixels flagged high and low. Runs of 16 pixels without a flag are
-/// skipped with one vectorised test.
-fn pixel_flags(ext: &[u8], mut mask: Option<&mut [u8]>) -> (usize, usize) {
+/// ORs a row's per-sample clip flags (`ext`, 3 per pixel) per pixel into `mask` (when given),
+/// and makes pixels black in every channel neutral in `out` (see [`BLACK`]); returns the number
+/// of pixels flagged high, low and black. Runs of 16 pixels without a flag are skipped with one
+/// vectorised test.
+fn pixel_flags(ext: &[u8], mut mask: Option<&mut [u8]>, out: &mut [f32]) -> (usize, usize, usize) {
     const RUN: usize = 16;
-    let (mut high, mut low) = (0u32, 0u32);
+    let (mut high, mut low, mut blk) = (0u32, 0u32, 0u32);
     for (k, run) in ext.chunks(3 * RUN).enumerate() {
         if run.iter().fold(0u8, |a, &e| a | e) == 0 {
             if let Some(m) = mask.as_deref_mut() {
@@ -597,15 +923,22 @@ fn pixel_flags(ext: &[u8], mut mask: Option<&mut [u8]>) -> (usize, usize) {
             continue;
         }
         for (x, e) in run.chunks_exact(3).enumerate() {
-            let flag = e[0] | e[1] | e[2];
+            let mut flag = e[0] | e[1] | e[2];
             high += (flag & CLIPPED_HIGH) as u32;
             low += (flag >> 1) as u32;
+            if e[0] & e[1] & e[2] & CLIPPED_LOW != 0 {
+                let o = &mut out[3 * (k * RUN + x)..3 * (k * RUN + x) + 3];
+                let v = o[0].min(o[1]).min(o[2]);
+                o.fill(v);
+                flag |= BLACK;
+                blk += 1;
+            }
             if let Some(m) = mask.as_deref_mut() {
                 m[k * RUN + x] = flag;
             }
         }
     }
-    (high as usize, low as usize)
+    (high as usize, low as usize, blk as usize)
 }
 
 /// `2^x` in f32, branch-free so loops over it vectorise: `x` is clamped to ±126, split by
@@ -663,7 +996,7 @@ mod tests {
                     };
                     let w = match weighting {
                         Weighting::None => 1.0,
-                        Weighting::Hat => {
+                        Weighting::Hat | Weighting::Noise => {
                             let mut w = z.min(255.0 - z).max(0.0);
                             if (j == 0 && z >= 127.5) || (j + 1 == p && z <= 127.5) {
                                 w = 127.0;
@@ -678,6 +1011,22 @@ mod tests {
                     den += w;
                 }
                 (num / den).exp()
+            })
+            .collect::<Vec<f64>>()
+            .chunks(3)
+            .enumerate()
+            .flat_map(|(k, v)| {
+                // Every channel 0 in every frame: neutral at the smallest channel.
+                let black = frames.iter().all(|f| match &f.pixels {
+                    Pixels::U8(p) => p[3 * k..3 * k + 3].iter().all(|&z| z == 0),
+                    Pixels::U16(p) => p[3 * k..3 * k + 3].iter().all(|&z| z == 0),
+                });
+                let m = v.iter().copied().fold(f64::INFINITY, f64::min);
+                if black {
+                    vec![m; 3]
+                } else {
+                    v.to_vec()
+                }
             })
             .collect()
     }
@@ -750,6 +1099,7 @@ mod tests {
                             weighting,
                             confidence: true,
                             clipped_mask: true,
+                            ..Default::default()
                         },
                     )
                     .unwrap();

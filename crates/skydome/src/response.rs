@@ -120,9 +120,13 @@ pub enum Weighting {
     /// mid-grey and for the longest below it (the default).
     #[default]
     Hat,
+    /// Inverse variance of each vote under a camera noise model (shot, read, quantisation and
+    /// JPEG noise; see [`crate::noise`]): a longer exposure, which collected more light, counts
+    /// for more. Zero at the black level and 255, fading to zero over the top codes.
+    Noise,
 }
 
-crate::named_enum!(Weighting, "weighting", [None => "none", Hat => "hat"]);
+crate::named_enum!(Weighting, "weighting", [None => "none", Hat => "hat", Noise => "noise"]);
 
 /// Debevec's hat weight of an 8-bit code: `z` up to 127, `255 − z` above; zero at 0 and 255.
 #[inline]
@@ -323,6 +327,7 @@ impl Calibration {
             model: None,
             iso: None,
             date: None,
+            noise: None,
         }
     }
 }
@@ -968,6 +973,11 @@ pub struct CameraProfile {
     pub iso: Option<f64>,
     /// Calibration date.
     pub date: Option<String>,
+    /// The camera's noise model (see [`crate::noise`]) for [`Weighting::Noise`], when known.
+    /// Optional: profiles written before it existed load without it, and the merge then
+    /// estimates it from the bracket.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<Box<crate::noise::NoiseModel>>,
 }
 
 impl CameraProfile {
@@ -985,6 +995,7 @@ impl CameraProfile {
             model: None,
             iso: None,
             date: None,
+            noise: None,
         }
     }
 

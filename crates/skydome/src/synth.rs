@@ -65,8 +65,15 @@ impl Crf {
 
     /// The true `g(z) = ln f⁻¹(max(z, ½) / 255)` for the 256 codes.
     pub fn g(&self) -> Vec<f64> {
+        self.g_with_black(0.0)
+    }
+
+    /// The true `g` when codes are `b + (255 − b) · f(X)` (a black level `b`):
+    /// `g(z) = ln f⁻¹(max(z − b, ½) / (255 − b))`; flat at and below the black level, where a
+    /// code says only "no more than this".
+    pub fn g_with_black(&self, b: f64) -> Vec<f64> {
         (0..256)
-            .map(|z| self.inverse((z as f64).max(0.5) / 255.0).ln())
+            .map(|z| self.inverse((z as f64 - b).max(0.5) / (255.0 - b)).ln())
             .collect()
     }
 }
@@ -97,6 +104,10 @@ pub struct SynthOptions {
     pub read_noise: f64,
     /// Per-channel responses (R, G, B).
     pub crf: [Crf; 3],
+    /// Black level, 8-bit code (0..=64): codes are `b + (255 − b) · f(X)`, as a film scan or a
+    /// camera that lifts its blacks gives. 0 = none (the default).
+    #[serde(default)]
+    pub black_level: f64,
 }
 
 impl Default for SynthOptions {
@@ -130,6 +141,7 @@ impl Default for SynthOptions {
                     shoulder: 1.2,
                 },
             ],
+            black_level: 0.0,
         }
     }
 }
@@ -201,6 +213,12 @@ fn check(opts: &SynthOptions) -> Result<(), SynthError> {
             ));
         }
     }
+    if !(opts.black_level.is_finite() && (0.0..=64.0).contains(&opts.black_level)) {
+        return bad(format!(
+            "black_level = {} (use 0..=64 codes)",
+            opts.black_level
+        ));
+    }
     Ok(())
 }
 
@@ -233,7 +251,8 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthBracket, SynthError> {
             }
             let xn = e / opts.full_well;
             let v = opts.crf[i % 3].forward(xn.clamp(0.0, 1.0));
-            codes.push((255.0 * v).round().clamp(0.0, 255.0) as u8);
+            let b = opts.black_level;
+            codes.push((b + (255.0 - b) * v).round().clamp(0.0, 255.0) as u8);
         }
         let (codes, ext) = match opts.jpeg_quality {
             Some(q) => (jpeg_round_trip(&codes, w, h, q)?, "jpg"),
@@ -254,7 +273,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthBracket, SynthError> {
     Ok(SynthBracket {
         truth,
         frames,
-        true_g: [opts.crf[0].g(), opts.crf[1].g(), opts.crf[2].g()],
+        true_g: opts.crf.map(|c| c.g_with_black(opts.black_level)),
         circle,
         exposure_scale: k,
     })

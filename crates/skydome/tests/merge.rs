@@ -6,7 +6,7 @@ use common::load_jpegs;
 use skydome::bracket::{Frame, Pixels};
 use skydome::compare::{compare, well_exposed_mask, CompareOptions};
 use skydome::merge::{
-    merge, merge_into, MergeError, MergeOptions, Weighting, CLIPPED_HIGH, CLIPPED_LOW,
+    merge, merge_into, MergeError, MergeOptions, Weighting, BLACK, CLIPPED_HIGH, CLIPPED_LOW,
 };
 use skydome::response::{calibrate, CalibrateOptions, Response};
 use skydome::synth::{generate, SynthOptions};
@@ -114,7 +114,7 @@ fn clipped_in_every_frame_keeps_shortest_exposure() {
 }
 
 #[test]
-fn black_in_every_frame_keeps_longest_exposure() {
+fn black_in_every_frame_takes_longest_exposure_and_stays_neutral() {
     let b = generate(&SynthOptions::default()).unwrap();
     let cal = calibrate(&b.frames, b.circle, &CalibrateOptions::default()).unwrap();
     let opts = MergeOptions {
@@ -133,17 +133,27 @@ fn black_in_every_frame_keeps_longest_exposure() {
         }
     }
     let m = merge(&frames, &cal.response, &opts).unwrap();
-    let clip = m.clipped.unwrap();
+    let clip = m.clipped.clone().unwrap();
     let tl = frames.last().unwrap().exposure.relative().ln();
+    // Neutral: every channel takes the smallest of the three channels' upper bounds from the
+    // longest frame (the curves' toes differ, which used to tint such pixels).
+    let want = (0..3)
+        .map(|c| (cal.response.curve(c)[0] - tl).exp() as f32)
+        .fold(f32::INFINITY, f32::min);
     for p in (0..8).flat_map(|y| (0..8).map(move |x| y * w + x)) {
         assert_ne!(clip[p] & CLIPPED_LOW, 0);
+        assert_ne!(clip[p] & BLACK, 0);
         for c in 0..3 {
-            let want = (cal.response.curve(c)[0] - tl).exp() as f32;
             let e = m.radiance.data[3 * p + c];
             assert!(e > 0.0 && (e - want).abs() <= 1e-4 * want, "{e} vs {want}");
         }
     }
     assert!(m.clipped_low >= 64);
+    assert!(m.black_pixels >= 64);
+    assert!(m
+        .warnings(None)
+        .iter()
+        .any(|s| s.contains("black in every frame")));
     assert!(m.radiance.data.iter().all(|v| v.is_finite() && *v > 0.0));
 }
 

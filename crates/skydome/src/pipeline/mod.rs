@@ -268,6 +268,8 @@ pub struct Products {
     pub overlay: bool,
     /// The per-pixel merge confidence as a grey picture.
     pub confidence: bool,
+    /// The per-pixel consistency test as a picture (white = frames disagree; implies the test).
+    pub consistency: bool,
     /// The equirectangular map (needs a lens).
     pub equirect: Option<EquirectOptions>,
     /// The 180° dome as Radiance's angular fish-eye (`-vta`, north up), whatever the lens's
@@ -286,6 +288,18 @@ pub struct Options {
     pub calibration_circle: Option<Circle>,
     /// Frame weighting of the merge.
     pub weighting: Weighting,
+    /// Black level of the frames, 8-bit code (0 for most cameras, ≈ 16 for film scans): codes
+    /// at or below count as black.
+    pub black_level: u8,
+    /// Align hand-held frames by translation before calibrating and merging (see
+    /// [`crate::align`]).
+    pub align: bool,
+    /// Test every pixel for frames disagreeing beyond their noise (moving clouds, shifts);
+    /// the fraction goes to the report, with a warning above 2 %.
+    pub consistency: bool,
+    /// Ghost-aware merge (implies `consistency`): where frames disagree, take the best-exposed
+    /// frame alone.
+    pub ghosts: bool,
     /// Lens model.
     pub lens: LensSource,
     /// Sky geometry (with a lens).
@@ -375,6 +389,14 @@ pub struct Report {
     pub clipped_high_pixels: usize,
     /// Pixels black even in the longest exposure.
     pub clipped_low_pixels: usize,
+    /// Pixels black in every channel of every frame (kept neutral).
+    pub black_pixels: usize,
+    /// The noise model the merge used (weighting `noise`, or the consistency test).
+    pub noise: Option<crate::noise::NoiseEstimate>,
+    /// Fraction of the tested pixels where frames disagree beyond their noise, when tested.
+    pub inconsistent_fraction: Option<f64>,
+    /// The translation of each frame, when aligned.
+    pub alignment: Option<crate::align::Alignment>,
     /// The header metadata of the radiance map.
     pub meta: HdrMeta,
     /// The fish-eye results, with a lens.
@@ -402,6 +424,8 @@ pub struct Dome {
     pub overlay: Option<RgbImage<u8>>,
     /// The confidence picture (grey, black = no frame well exposed), when asked.
     pub confidence: Option<RgbImage<u8>>,
+    /// The consistency picture (white = frames disagree beyond their noise), when asked.
+    pub consistency: Option<RgbImage<u8>>,
     /// The camera profile made by calibrating on this bracket (with the camera's EXIF make,
     /// model, ISO and date), when it calibrated.
     pub camera_profile: Option<CameraProfile>,
@@ -421,8 +445,15 @@ pub fn run(
 ) -> Result<Dome, PipelineError> {
     let mut p = Reporter(progress);
     check_options(options)?;
-    let br = read_bracket(input, &mut p)?;
+    let mut br = read_bracket(input, &mut p)?;
     let mut warnings = br.warnings.clone();
+    let alignment = if options.align {
+        let a = crate::align::align(&br.frames, &crate::align::AlignOptions::default());
+        br.frames = crate::align::apply_shifts(&br.frames, &a);
+        Some(a)
+    } else {
+        None
+    };
 
     p.at(Stage::Lens, 0.0)?;
     let lens = lens_profile(&options.lens, &br)?;
@@ -436,6 +467,8 @@ pub fn run(
         ResponseSource::Profile(prof) => (prof.response()?, None, None, "profile".to_string()),
         ResponseSource::Calibrate(o) => {
             let cal = response::calibrate(&br.frames, circle, o)?;
+            warnings.extend(cal.report().shortfall_warning());
+            warnings.extend(cal.report().range_warning());
             let mut prof = cal.to_profile();
             describe_camera(&mut prof, &br);
             let report = cal.report().clone();
@@ -451,16 +484,54 @@ pub fn run(
     p.at(Stage::Calibrating, 1.0)?;
 
     p.at(Stage::Merging, 0.0)?;
+    let profile_noise = match &options.response {
+        ResponseSource::Profile(prof) => prof.noise.as_deref().copied(),
+        ResponseSource::Calibrate(_) => None,
+    };
+    let check = options.consistency || options.ghosts || options.products.consistency;
     let merged = merge::merge(
         &br.frames,
         &response,
         &MergeOptions {
             weighting: options.weighting,
             confidence: options.products.confidence,
-            clipped_mask: false,
+            // Only needed to count black pixels inside the lens circle.
+            clipped_mask: lens.is_some(),
+            noise: profile_noise,
+            black_level: options.black_level,
+            consistency: check,
+            ghosts: options.ghosts,
         },
     )?;
     p.at(Stage::Merging, 1.0)?;
+    // Black pixels and disagreement are judged inside the lens circle when there is one (the
+    // housing outside is black in every frame by design).
+    let area: Option<Vec<bool>> = lens.as_ref().map(|(l, _)| {
+        let w = br.width();
+        (0..w * br.height())
+            .map(|i| l.circle.contains_pixel(i % w, i / w))
+            .collect()
+    });
+    warnings.extend(merged.warnings(area.as_deref()));
+    let inconsistent_fraction = merged
+        .inconsistent
+        .is_some()
+        .then(|| merged.inconsistent_fraction());
+    let camera_profile = camera_profile.map(|mut prof| {
+        prof.noise = merged.noise.filter(|n| n.fitted).map(|n| Box::new(n.model));
+        prof
+    });
+    let consistency = match (&merged.inconsistent, options.products.consistency) {
+        (Some(f), true) => {
+            let v: Vec<f32> = f.iter().map(|&b| b as f32).collect();
+            Some(crate::formats::picture::grey_picture(
+                br.width(),
+                br.height(),
+                &v,
+            )?)
+        }
+        _ => None,
+    };
     if merged.clipped_high > 0 {
         warnings.push(format!(
             "{} pixels are clipped even in the shortest exposure; their radiance is a lower bound",
@@ -545,6 +616,10 @@ pub fn run(
         sampling,
         clipped_high_pixels: merged.clipped_high,
         clipped_low_pixels: merged.clipped_low,
+        black_pixels: merged.black_pixels,
+        noise: merged.noise,
+        inconsistent_fraction,
+        alignment,
         meta: meta.clone(),
         geometry,
         photometry,
@@ -558,6 +633,7 @@ pub fn run(
         preview,
         overlay,
         confidence,
+        consistency,
         camera_profile,
         lens_profile,
         report,

@@ -1,0 +1,330 @@
+//! The noise-aware merge (`Weighting::Noise`) against ground truth on phone-like brackets, the
+//! hat on the same frames, and OpenCV's Debevec merge on real brackets.
+mod common;
+
+use skydome::compare::well_exposed_mask;
+use skydome::merge::{merge, MergeOptions, Weighting};
+use skydome::noise::estimate;
+use skydome::response::{calibrate, CalibrateOptions, Response};
+use skydome::synth::{generate, SynthBracket, SynthOptions};
+use skydome::HdrImage;
+
+/// A phone-like bracket: full well 3000 e⁻, read noise 3 e⁻, JPEG quality 95 (4:2:0).
+fn phone(evs: &[f64], seed: u64, size: usize) -> SynthBracket {
+    generate(&SynthOptions {
+        width: size,
+        height: size,
+        evs: evs.to_vec(),
+        seed,
+        jpeg_quality: Some(95),
+        full_well: 3000.0,
+        read_noise: 3.0,
+        ..SynthOptions::default()
+    })
+    .unwrap()
+}
+
+/// Per channel, log2 RMSE (stops) against the truth inside `mask`, after one least-squares
+/// scale per channel in the log domain.
+fn log2_rmse_per_channel(a: &HdrImage, truth: &HdrImage, mask: &[bool]) -> [f64; 3] {
+    [0, 1, 2].map(|c| {
+        let d: Vec<f64> = mask
+            .iter()
+            .enumerate()
+            .filter(|(p, &m)| m && truth.data[3 * p + c] > 0.0 && a.data[3 * p + c] > 0.0)
+            .map(|(p, _)| (a.data[3 * p + c] as f64 / truth.data[3 * p + c] as f64).log2())
+            .collect();
+        let mean = d.iter().sum::<f64>() / d.len() as f64;
+        (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt()
+    })
+}
+
+/// The true response with the gauge `g(128) = 0`, as a calibration would give it.
+fn true_response(b: &SynthBracket) -> Response {
+    Response::from_curves(
+        b.true_g
+            .clone()
+            .map(|g| g.iter().map(|v| v - g[128]).collect()),
+    )
+    .unwrap()
+}
+
+fn run(b: &SynthBracket, r: &Response, w: Weighting) -> [f64; 3] {
+    let m = merge(
+        &b.frames,
+        r,
+        &MergeOptions {
+            weighting: w,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let mask = well_exposed_mask(&b.frames, 10, 245).unwrap();
+    log2_rmse_per_channel(&m.radiance, &b.truth, &mask)
+}
+
+/// With the camera's true response, inverse-variance weights beat the hat in every channel of
+/// every bracket (3 frames 2 EV apart and 5 frames 1 EV apart, four scenes). Measured (log2
+/// RMSE R/G/B, stops, 384², hat → noise): seed 1 3×2 EV 0.208/0.219/0.321 → 0.196/0.196/0.263;
+/// seed 2 5×1 EV 0.215/0.251/0.371 → 0.204/0.206/0.285. The floor is the sensor: the dim
+/// ground collects ≈ 50 e⁻ even in the longest frame, ≈ 0.2 stops of shot noise.
+#[test]
+fn noise_weights_beat_the_hat_with_the_true_curve_on_phone_like_brackets() {
+    for (evs, seed) in [
+        (vec![-2.0, 0.0, 2.0], 1),
+        (vec![-2.0, -1.0, 0.0, 1.0, 2.0], 2),
+        (vec![-2.0, 0.0, 2.0], 3),
+        (vec![-2.0, -1.0, 0.0, 1.0, 2.0], 4),
+    ] {
+        let b = phone(&evs, seed, 256);
+        let truth_r = true_response(&b);
+        let hat = run(&b, &truth_r, Weighting::Hat);
+        let noise = run(&b, &truth_r, Weighting::Noise);
+        println!(
+            "{} frames, seed {seed}, true curve: hat {hat:.4?} noise {noise:.4?}",
+            evs.len()
+        );
+        let mean = |v: [f64; 3]| v.iter().sum::<f64>() / 3.0;
+        assert!(mean(noise) < 0.95 * mean(hat), "{noise:?} vs {hat:?}");
+        for c in 0..3 {
+            assert!(
+                noise[c] < 1.02 * hat[c],
+                "channel {c}: {noise:?} vs {hat:?}"
+            );
+        }
+        // Self-calibrated: reported, not asserted (see docs/accuracy.md: the calibrated
+        // curve's error at the top codes, which the noise weights trust more, outweighs the
+        // gain on this scene).
+        let cal = calibrate(&b.frames, b.circle, &CalibrateOptions::default()).unwrap();
+        let hc = run(&b, &cal.response, Weighting::Hat);
+        let nc = run(&b, &cal.response, Weighting::Noise);
+        println!("  calibrated: hat {hc:.4?} noise {nc:.4?}");
+    }
+}
+
+/// The estimated model is fitted on every bracket, finite, and of the right order: the
+/// simulated sensor collects ≈ 230 e⁻ at code 128 in green (JPEG smooths some noise away, so
+/// the effective count the frames show is higher, never lower).
+#[test]
+fn noise_model_is_estimated_from_the_bracket() {
+    for seed in [1, 2] {
+        let b = phone(&[-2.0, 0.0, 2.0], seed, 256);
+        let truth_r = true_response(&b);
+        let est = estimate(&b.frames, &truth_r, 0, None);
+        println!("seed {seed}: {est:?}");
+        assert!(est.fitted && est.model.is_valid());
+        let k = est.model.channels[1].electrons_at_gauge;
+        assert!((150.0..2000.0).contains(&k), "{k}");
+    }
+    // A bracket with nothing well exposed in two frames falls back to the default.
+    let mut b = phone(&[-2.0, 0.0, 2.0], 1, 64);
+    for f in &mut b.frames {
+        if let skydome::bracket::Pixels::U8(v) = &mut f.pixels {
+            v.fill(0);
+        }
+    }
+    let r = Response::linear();
+    let est = estimate(&b.frames, &r, 0, None);
+    assert!(!est.fitted);
+    let m = merge(
+        &b.frames,
+        &r,
+        &MergeOptions {
+            weighting: Weighting::Noise,
+            clipped_mask: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(m.warnings(None).iter().any(|w| w.contains("noise model")));
+    // Black in every frame: flagged, neutral, and said.
+    assert_eq!(m.black_pixels, 64 * 64);
+    assert!(m
+        .radiance
+        .data
+        .chunks(3)
+        .all(|p| p[0] == p[1] && p[1] == p[2] && p[0].is_finite()));
+    assert!(m
+        .warnings(None)
+        .iter()
+        .any(|w| w.contains("black in every frame")));
+}
+
+/// A "cloud" that moved between exposures: a block of the longest frame is replaced by what
+/// that frame saw 40 pixels away. The consistency test flags the block; the ghost-aware merge
+/// changes only flagged pixels. (Its accuracy against a moving-scene truth is not yet
+/// measured: see docs/accuracy.md.)
+#[test]
+fn moved_content_is_flagged_and_the_ghost_aware_merge_repairs_it() {
+    let b = generate(&SynthOptions {
+        width: 256,
+        height: 256,
+        fisheye: false,
+        seed: 5,
+        ..SynthOptions::default()
+    })
+    .unwrap();
+    let truth_r = true_response(&b);
+    let mut frames = b.frames.clone();
+    let (x0, x1, y0, y1) = (40usize, 100usize, 60usize, 120usize);
+    let last = frames.len() - 1;
+    if let skydome::bracket::Pixels::U8(v) = &mut frames[last].pixels {
+        let orig = v.clone();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                for c in 0..3 {
+                    v[3 * (y * 256 + x) + c] = orig[3 * (y * 256 + x + 40) + c];
+                }
+            }
+        }
+    }
+    let inside = |p: usize| (x0..x1).contains(&(p % 256)) && (y0..y1).contains(&(p / 256));
+    let opts = MergeOptions {
+        consistency: true,
+        ..Default::default()
+    };
+    let plain = merge(&frames, &truth_r, &opts).unwrap();
+    let flags = plain.inconsistent.as_ref().unwrap();
+    let (mut in_flag, mut out_flag, mut n_in) = (0usize, 0usize, 0usize);
+    for (p, &f) in flags.iter().enumerate() {
+        if inside(p) {
+            n_in += 1;
+            in_flag += f as usize;
+        } else {
+            out_flag += f as usize;
+        }
+    }
+    let frac_in = in_flag as f64 / n_in as f64;
+    let frac_out = out_flag as f64 / (flags.len() - n_in) as f64;
+    println!(
+        "flagged {frac_in:.3} inside the moved block, {frac_out:.4} outside; overall {:.4}",
+        plain.inconsistent_fraction()
+    );
+    assert!(frac_in > 0.3, "{frac_in}");
+    // Measured 0.027 on this static scene: the test is not yet free of false alarms (see
+    // docs/accuracy.md), so it is an option, not the default.
+    assert!(frac_out < 0.05, "{frac_out}");
+    assert!(frac_in > 10.0 * frac_out);
+    assert!(plain.inconsistent_fraction() > 0.0);
+    // The ghost-aware merge replaces exactly the flagged pixels and nothing else.
+    let ghost = merge(
+        &frames,
+        &truth_r,
+        &MergeOptions {
+            ghosts: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    for (p, &f) in flags.iter().enumerate() {
+        if f == 0 {
+            assert_eq!(
+                &ghost.radiance.data[3 * p..3 * p + 3],
+                &plain.radiance.data[3 * p..3 * p + 3]
+            );
+        }
+    }
+    let changed = (0..flags.len())
+        .filter(|&p| ghost.radiance.data[3 * p..3 * p + 3] != plain.radiance.data[3 * p..3 * p + 3])
+        .count();
+    assert!(changed > 0 && changed <= plain.inconsistent_pixels);
+}
+
+/// OpenCV 5.0.0 `CalibrateDebevec()` + `MergeDebevec()` (defaults) on the real sets: the worst
+/// frame's median `|log2(E_frame / E_merged)|` over pixels with all channels in 20..=235,
+/// `E_frame` from OpenCV's own curve. frobisher_001 per frame 0.008 / 0.021 / 0.015;
+/// banterle_room 0.067 / 0.245 / 0.092 / 0.065 / 0.071 / 0.067 / 0.090 (shortest first).
+const OPENCV_WORST_FRAME: [(&str, f64); 2] = [("frobisher_001", 0.021), ("banterle_room", 0.245)];
+
+/// The same measure for skydome's merge.
+fn worst_frame(frames: &[skydome::bracket::Frame], r: &Response, m: &HdrImage) -> Vec<f64> {
+    frames
+        .iter()
+        .map(|f| {
+            let skydome::bracket::Pixels::U8(v) = &f.pixels else {
+                panic!("8-bit")
+            };
+            let lt = f.exposure.relative().ln();
+            let mut d: Vec<f64> = Vec::new();
+            for p in 0..f.width * f.height {
+                let px = &v[3 * p..3 * p + 3];
+                if px.iter().all(|&z| (20..=235).contains(&z)) {
+                    for (c, &z) in px.iter().enumerate() {
+                        let e = r.curve(c)[z as usize] - lt;
+                        d.push(((e - (m.data[3 * p + c] as f64).ln()) / 2f64.ln()).abs());
+                    }
+                }
+            }
+            d.sort_by(f64::total_cmp);
+            d[d.len() / 2]
+        })
+        .collect()
+}
+
+#[test]
+fn real_sets_agree_between_frames_better_than_opencv_with_the_default_weights() {
+    let Some(d) = common::data_dir() else { return };
+    let sets: [(&str, Vec<(&str, f64)>); 2] = [
+        (
+            "frobisher_001",
+            vec![
+                ("IMG_2600.jpg", 0.125),
+                ("IMG_2601.jpg", 1.0),
+                ("IMG_2602.jpg", 8.0),
+            ],
+        ),
+        (
+            "banterle_room",
+            (0..7)
+                .map(|i| {
+                    let t = [
+                        2.0,
+                        0.5,
+                        0.125,
+                        1.0 / 30.0,
+                        1.0 / 125.0,
+                        1.0 / 1000.0,
+                        1.0 / 4000.0,
+                    ];
+                    (
+                        [
+                            "stack_room_exp_0.jpg",
+                            "stack_room_exp_1.jpg",
+                            "stack_room_exp_2.jpg",
+                            "stack_room_exp_3.jpg",
+                            "stack_room_exp_4.jpg",
+                            "stack_room_exp_5.jpg",
+                            "stack_room_exp_6.jpg",
+                        ][i],
+                        t[i],
+                    )
+                })
+                .collect(),
+        ),
+    ];
+    for ((name, files), (cv_name, opencv)) in sets.iter().zip(OPENCV_WORST_FRAME) {
+        assert_eq!(*name, cv_name);
+        let frames = common::load_jpegs(&d.join(name), files);
+        let cal = calibrate(&frames, None, &CalibrateOptions::default()).unwrap();
+        for w in [Weighting::Hat, Weighting::Noise] {
+            let m = merge(
+                &frames,
+                &cal.response,
+                &MergeOptions {
+                    weighting: w,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let per = worst_frame(&frames, &cal.response, &m.radiance);
+            let worst = per.iter().copied().fold(0.0, f64::max);
+            println!("{name} {w:?}: per frame {per:.3?}, worst {worst:.3} (OpenCV {opencv:.3})");
+            // The default (hat) beats OpenCV on both sets. The noise weights do on frobisher
+            // (0.018) but not on banterle_room (0.271: its longest, 2 s frame is trusted more
+            // and disagrees most), which is why they are not the default; printed, not asserted.
+            if w == Weighting::Hat {
+                assert!(worst < opencv, "{name} {w:?}: {worst}");
+            }
+        }
+    }
+}
