@@ -119,6 +119,12 @@ pub(crate) fn fast_log2(x: f32) -> f32 {
     if x < f32::MIN_POSITIVE {
         return x.log2();
     }
+    log2_normal(x)
+}
+
+/// [`fast_log2`] without the subnormal branch: exact only for normal, finite `x > 0`.
+#[inline(always)]
+fn log2_normal(x: f32) -> f32 {
     let bits = x.to_bits();
     let e = ((bits >> 23) as i32 - 127) as f32;
     let t = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000) - 1.0;
@@ -189,37 +195,52 @@ impl Acc {
     }
 
     /// Adds the pixels of one row span with weight `w` each (`px` holds whole RGB triples).
+    ///
+    /// Works in blocks of 64 pixels and three passes — luminance, log₂, then the branchy
+    /// bookkeeping — so the first two have no branches and vectorise; one pass per pixel would
+    /// leave the polynomial's chain of dependent multiply-adds waiting on each other.
     #[inline]
     fn add_span(&mut self, px: &[f32], w: u32) {
+        const B: usize = 64;
+        let mut lum = [0.0f32; B];
+        let mut lg = [0.0f32; B];
         // Sums of logs over one span stay in f32 (a span is at most a row: ≤ 32767 values of
         // magnitude ≤ 128, so the relative error stays ~1e-4 stops), then go to f64.
         let mut row_sum = 0.0f32;
         let mut row_n = 0u64;
         let mut lo = self.min;
         let mut hi = self.max;
-        for p in px.chunks_exact(3) {
-            let rgb = [p[0].max(0.0), p[1].max(0.0), p[2].max(0.0)];
-            let l = luminance(rgb);
-            if l > 0.0 && l < f32::INFINITY {
-                let lg = fast_log2(l);
-                row_sum += lg;
-                row_n += 1;
-                lo = lo.min(l);
-                hi = hi.max(l);
-                let bin = ((lg - HIST_MIN_LOG2 as f32) * HIST_BINS_PER_STOP as f32)
-                    .clamp(0.0, (HIST_BINS - 1) as f32) as usize;
-                self.hist[bin] += u64::from(w);
-            } else if l == f32::INFINITY {
-                // Brightest possible value: top of the histogram, out of the mean.
-                self.inf += u64::from(w);
-                self.hist[HIST_BINS - 1] += u64::from(w);
-            } else {
-                self.zero += u64::from(w);
+        let wt = u64::from(w);
+        for chunk in px.chunks(3 * B) {
+            let n = chunk.len() / 3;
+            for (l, p) in lum.iter_mut().zip(chunk.chunks_exact(3)) {
+                *l = luminance([p[0].max(0.0), p[1].max(0.0), p[2].max(0.0)]);
+            }
+            for (g, l) in lg[..n].iter_mut().zip(&lum[..n]) {
+                *g = log2_normal(l.max(f32::MIN_POSITIVE));
+            }
+            for (&l, &g) in lum[..n].iter().zip(&lg[..n]) {
+                if l > 0.0 && l < f32::INFINITY {
+                    let g = if l < f32::MIN_POSITIVE { l.log2() } else { g };
+                    row_sum += g;
+                    row_n += 1;
+                    lo = lo.min(l);
+                    hi = hi.max(l);
+                    let bin = ((g - HIST_MIN_LOG2 as f32) * HIST_BINS_PER_STOP as f32)
+                        .clamp(0.0, (HIST_BINS - 1) as f32) as usize;
+                    self.hist[bin] += wt;
+                } else if l == f32::INFINITY {
+                    // Brightest possible value: top of the histogram, out of the mean.
+                    self.inf += wt;
+                    self.hist[HIST_BINS - 1] += wt;
+                } else {
+                    self.zero += wt;
+                }
             }
         }
         self.min = lo;
         self.max = hi;
-        self.count += row_n * u64::from(w);
+        self.count += row_n * wt;
         self.sum_log2 += f64::from(row_sum) * f64::from(w);
     }
 
