@@ -61,10 +61,11 @@ synth() {
 frames_of() { awk -v d="$1" '!/^#/ && NF {printf "%s/%s ", d, $1}' "$1/times.txt"; }
 times_of() { awk '!/^#/ && NF {printf "%s%s", (n++?",":""), $2}' "$1/times.txt"; }
 
-# timed NAME CMD...: runs CMD once under /usr/bin/time, appends "wall_s peak_kB" to $WORK/NAME.txt.
+# timed NAME CMD...: runs CMD once under /usr/bin/time, appends "wall_s peak_kB user_s sys_s" to
+# $WORK/NAME.txt.
 timed() {
   local name="$1"; shift
-  /usr/bin/time -f "%e %M" -o "$WORK/.time" "$@" >/dev/null 2>"$WORK/.stderr" || {
+  /usr/bin/time -f "%e %M %U %S" -o "$WORK/.time" "$@" >/dev/null 2>"$WORK/.stderr" || {
     echo "bench.sh: $name failed:" >&2; cat "$WORK/.stderr" >&2; exit 1; }
   cat "$WORK/.time" >> "$WORK/$name.txt"
 }
@@ -90,15 +91,18 @@ import statistics, sys, os
 w = sys.argv[1]
 def load(n):
     rows = [l.split() for l in open(os.path.join(w, n + ".txt")) if l.strip()]
-    return statistics.median(float(r[0]) for r in rows), max(int(r[1]) for r in rows) / 1024, len(rows)
+    wall = statistics.median(float(r[0]) for r in rows)
+    cpu = statistics.median(float(r[2]) + float(r[3]) for r in rows)
+    return wall, max(int(r[1]) for r in rows) / 1024, cpu, len(rows)
 s, f, o = load("skydome"), load("floor"), load("opencv")
-print(f"{'3 × 2448² (6 MP) JPEGs':40} {'median wall':>12} {'peak memory':>12}")
-print(f"{'skydome merge --preview (calibrating)':40} {s[0]:10.3f} s {s[1]:9.0f} MB")
-print(f"{'decode floor (Pillow/libjpeg-turbo, 1 thread)':40} {f[0]:10.3f} s {f[1]:9.0f} MB")
-print(f"{'OpenCV (Debevec calibrate+merge, Reinhard)':40} {o[0]:10.3f} s {o[1]:9.0f} MB")
-print(f"runs: {s[2]} each, alternating")
-print(f"skydome / decode floor = {s[0] / f[0]:.2f}   (target ≤ 1.5)")
-print(f"OpenCV / skydome       = {o[0] / s[0]:.1f}    (target ≥ 10)")
+print(f"{'3 × 2448² (6 MP) JPEGs':46} {'median wall':>12} {'median CPU':>11} {'peak memory':>12}")
+for name, v in [("skydome merge --preview (calibrating)", s),
+                ("decode floor (Pillow/libjpeg-turbo, 1 thread)", f),
+                ("OpenCV (Debevec calibrate+merge, Reinhard)", o)]:
+    print(f"{name:46} {v[0]:10.3f} s {v[2]:9.3f} s {v[1]:9.0f} MB")
+print(f"runs: {s[3]} each, alternating; CPU = user + system time of the process (all threads)")
+print(f"skydome / decode floor = {s[0] / f[0]:.2f} wall, {s[2] / f[2]:.2f} CPU   (target ≤ 1.5)")
+print(f"OpenCV / skydome       = {o[0] / s[0]:.1f} wall, {o[2] / s[2]:.1f} CPU    (target ≥ 10)")
 EOF
 
 # --- Scaling: frames × megapixels ---------------------------------------------------------------
@@ -116,7 +120,7 @@ for size in $SIZES; do
     rm -f "$WORK/scale.txt"
     # shellcheck disable=SC2046
     timed scale "$SKYDOME" merge $(frames_of "$d") --times "$(times_of "$d")" -o "$WORK/scale.hdr" --force --quiet
-    read -r wall kb < "$WORK/scale.txt"
+    read -r wall kb _ < "$WORK/scale.txt"
     mp=$(awk -v s="$size" 'BEGIN{printf "%.0f", s*s/1e6}')
     awk -v s="$size" -v n="$n" -v w="$wall" -v k="$kb" -v mp="$mp" \
       'BEGIN{printf "%-10s %-8s %8.2f s %9.0f MB %14.1f\n", s "² (" mp " MP)", n, w, k/1024, w*1e9/(s*s*n)}'

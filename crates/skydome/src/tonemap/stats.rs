@@ -265,30 +265,50 @@ impl Acc {
         }
     }
 
+    /// Per-channel minimum, maximum and sum. Four pixels (12 samples) at a time into 12
+    /// lanes of accumulators, so the common all-valid case has no branch per sample and
+    /// vectorises; a group holding an invalid sample goes pixel by pixel.
     #[inline]
     fn add_channels(&mut self, px: &[f32]) {
-        let mut lo = self.ch_min;
-        let mut hi = self.ch_max;
-        let mut sum = [0.0f32; 3];
-        for p in px.chunks_exact(3) {
-            // NaN fails every comparison, so `!(v >= 0 && v < ∞)` catches it too.
-            let valid = (p[0] >= 0.0 && p[0] < f32::INFINITY)
-                && (p[1] >= 0.0 && p[1] < f32::INFINITY)
-                && (p[2] >= 0.0 && p[2] < f32::INFINITY);
-            if !valid {
-                self.invalid += 1;
-                continue;
+        let mut lo = [f32::INFINITY; 12];
+        let mut hi = [f32::NEG_INFINITY; 12];
+        let mut sum = [0.0f32; 12];
+        let groups = px.chunks_exact(12);
+        let tail = groups.remainder();
+        let mut slow = |p: &[f32], lo: &mut [f32; 12], hi: &mut [f32; 12], sum: &mut [f32; 12]| {
+            for q in p.chunks_exact(3) {
+                // NaN fails every comparison, so `!(v >= 0 && v < ∞)` catches it too.
+                if q.iter().all(|v| *v >= 0.0 && *v < f32::INFINITY) {
+                    for c in 0..3 {
+                        lo[c] = lo[c].min(q[c]);
+                        hi[c] = hi[c].max(q[c]);
+                        sum[c] += q[c];
+                    }
+                } else {
+                    self.invalid += 1;
+                }
             }
-            for c in 0..3 {
-                lo[c] = lo[c].min(p[c]);
-                hi[c] = hi[c].max(p[c]);
-                sum[c] += p[c];
+        };
+        for g in groups {
+            let ok = g
+                .iter()
+                .fold(true, |ok, v| ok & (*v >= 0.0) & (*v < f32::INFINITY));
+            if ok {
+                for i in 0..12 {
+                    lo[i] = lo[i].min(g[i]);
+                    hi[i] = hi[i].max(g[i]);
+                    sum[i] += g[i];
+                }
+            } else {
+                slow(g, &mut lo, &mut hi, &mut sum);
             }
         }
-        self.ch_min = lo;
-        self.ch_max = hi;
-        for c in 0..3 {
-            self.ch_sum[c] += f64::from(sum[c]);
+        slow(tail, &mut lo, &mut hi, &mut sum);
+        for (i, ((l, h), s)) in lo.iter().zip(&hi).zip(&sum).enumerate() {
+            let c = i % 3;
+            self.ch_min[c] = self.ch_min[c].min(*l);
+            self.ch_max[c] = self.ch_max[c].max(*h);
+            self.ch_sum[c] += f64::from(*s);
         }
     }
 
