@@ -3,12 +3,11 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use skydome::fisheye::{LensKind, LensProfile};
-use skydome::formats::HdrMeta;
+use skydome::fisheye::{self, LensKind, LensProfile};
+use skydome::pipeline;
 use skydome::reproject::{self, Ground, MapProjection, ReprojectOptions};
 use skydome::sky::{DevicePose, ImageOrientation, SkyGeometry};
 
-use crate::geometry::PoseArg;
 use crate::io::{self, Outputs};
 
 /// Arguments of `skydome reproject`.
@@ -32,8 +31,8 @@ pub struct Args {
     #[arg(long, allow_hyphen_values = true, default_value_t = 0.0)]
     pub north: f64,
     /// How the phone lay.
-    #[arg(long, value_enum, default_value_t = PoseArg::ScreenDown)]
-    pub device_pose: PoseArg,
+    #[arg(long, default_value = "screen-down", value_parser = crate::geometry::parse_pose)]
+    pub device_pose: DevicePose,
     /// Output width (equirect) or side (other maps) in pixels.
     #[arg(long, default_value_t = 1024)]
     pub size: usize,
@@ -67,44 +66,10 @@ pub enum Target {
 pub fn run(a: Args, quiet: bool) -> Result<()> {
     io::check_destination(&a.output, std::slice::from_ref(&a.input), a.force)?;
     let r = crate::radiance::read(&a.input)?;
-    let lens = match (&a.lens, a.dome) {
-        (Some(p), None) => crate::geometry::read_lens(p)?,
-        (None, Some(kind)) => {
-            // A cropped dome is square with the horizon circle inscribed.
-            let c = skydome::image::Circle {
-                cx: r.image.width as f64 / 2.0,
-                cy: r.image.height as f64 / 2.0,
-                r: r.image.width.min(r.image.height) as f64 / 2.0,
-            };
-            LensProfile::from_fov(c, 180.0, kind).context("dome lens")?
-        }
-        _ => bail!("give either --lens lens.json (an uncropped photo) or --dome MODEL (a 180° dome from merge --crop)"),
-    };
-    let pose = match a.device_pose {
-        PoseArg::ScreenDown => DevicePose::ScreenDown,
-        PoseArg::ScreenUp => DevicePose::ScreenUp,
-    };
-    let geom =
-        SkyGeometry::new(&lens, a.north, pose, ImageOrientation::Normal).context("sky geometry")?;
-    let target = match a.to {
-        Target::Equirect => MapProjection::Equirect {
-            width: a.size,
-            centre_azimuth_deg: a.centre_azimuth,
-        },
-        Target::Angular => MapProjection::Angular {
-            size: a.size,
-            centre_azimuth_deg: a.centre_azimuth,
-        },
-        Target::Mirrorball => MapProjection::MirrorBall {
-            size: a.size,
-            centre_azimuth_deg: a.centre_azimuth,
-        },
-        Target::Fisheye => MapProjection::Fisheye {
-            size: a.size,
-            model: LensKind::Equidistant,
-            fov_deg: 180.0,
-        },
-    };
+    let lens = lens(&a, &r.image)?;
+    let geom = SkyGeometry::new(&lens, a.north, a.device_pose, ImageOrientation::Normal)
+        .context("sky geometry")?;
+    let target = target(&a);
     let spin = io::spinner(quiet, "reprojecting");
     let map = reproject::reproject(
         &r.image,
@@ -118,12 +83,10 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     .with_context(|| a.input.display().to_string())?;
     spin.finish_and_clear();
     let e_in = reproject::horizontal_irradiance_fisheye(&r.image, &geom);
-    let meta = HdrMeta {
-        capdate: r.meta.capdate.clone(),
-        gmt: r.meta.gmt.clone(),
-        view: (a.to == Target::Fisheye).then(|| "-vta -vh 180 -vv 180".to_string()),
-        ..HdrMeta::default()
-    };
+    let mut meta = pipeline::equirect_meta(&r.meta);
+    if let MapProjection::Fisheye { model, fov_deg, .. } = target {
+        meta.view = fisheye::radiance_view(model, fov_deg);
+    }
     let mut out = Outputs::default();
     out.add(
         &a.output,
@@ -152,4 +115,44 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The input's lens: a profile file, or a 180° dome whose horizon is inscribed in the image.
+fn lens(a: &Args, img: &skydome::HdrImage) -> Result<LensProfile> {
+    Ok(match (&a.lens, a.dome) {
+        (Some(p), None) => crate::geometry::read_lens(p)?,
+        (None, Some(kind)) => {
+            // A cropped dome is square with the horizon circle inscribed.
+            let c = skydome::image::Circle {
+                cx: img.width as f64 / 2.0,
+                cy: img.height as f64 / 2.0,
+                r: img.width.min(img.height) as f64 / 2.0,
+            };
+            LensProfile::from_fov(c, 180.0, kind).context("dome lens")?
+        }
+        _ => bail!("give either --lens lens.json (an uncropped photo) or --dome MODEL (a 180° dome from merge --crop)"),
+    })
+}
+
+/// The output map.
+fn target(a: &Args) -> MapProjection {
+    match a.to {
+        Target::Equirect => MapProjection::Equirect {
+            width: a.size,
+            centre_azimuth_deg: a.centre_azimuth,
+        },
+        Target::Angular => MapProjection::Angular {
+            size: a.size,
+            centre_azimuth_deg: a.centre_azimuth,
+        },
+        Target::Mirrorball => MapProjection::MirrorBall {
+            size: a.size,
+            centre_azimuth_deg: a.centre_azimuth,
+        },
+        Target::Fisheye => MapProjection::Fisheye {
+            size: a.size,
+            model: LensKind::Equidistant,
+            fov_deg: 180.0,
+        },
+    }
 }
