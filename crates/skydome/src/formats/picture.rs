@@ -97,7 +97,7 @@ pub fn encode_rgb8(img: &RgbImage<u8>, format: PictureFormat) -> Result<Vec<u8>,
 }
 
 /// Baseline 4:2:0 JPEG through the `jpeg-encoder` crate. Chosen by measurement over `image`'s
-/// encoder (which is about twice as slow on a 6 MP preview; `cargo bench --bench tonemap`,
+/// encoder (which is 4× slower on a 6 MP preview here; `cargo bench --bench tonemap`,
 /// group `preview_6mp`): it has an AVX2 path picked at run time and plain Rust elsewhere, so it
 /// builds for wasm32 too.
 fn encode_jpeg(img: &RgbImage<u8>, quality: u8) -> Result<Vec<u8>, PictureError> {
