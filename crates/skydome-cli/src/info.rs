@@ -2,9 +2,9 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use serde::Serialize;
-use skydome::image::luminance;
+use skydome::tonemap::radiance_stats;
 
 /// Arguments of `skydome info`.
 #[derive(Debug, clap::Args)]
@@ -34,7 +34,8 @@ struct Info {
     zero_pixels: usize,
     /// log2(max / min) of positive luminance, in stops.
     dynamic_range_stops: Option<f64>,
-    /// log2(p99.9 / p0.1) of positive luminance, in stops (robust to single pixels).
+    /// log2(p99.9 / p0.1) of positive luminance, in stops (robust to single pixels; percentiles
+    /// resolved to 1/32 stop).
     dynamic_range_stops_robust: Option<f64>,
 }
 
@@ -42,40 +43,19 @@ struct Info {
 pub fn run(a: Args) -> Result<()> {
     let r = crate::radiance::read(&a.file)?;
     let img = &r.image;
-    let mut min = [f32::INFINITY; 3];
-    let mut max = [f32::NEG_INFINITY; 3];
-    let mut sum = [0f64; 3];
-    let mut invalid = 0;
-    let mut lum = Vec::with_capacity(img.pixel_count());
-    let mut zero = 0;
-    for p in img.pixels() {
-        if p.iter().any(|v| !v.is_finite() || *v < 0.0) {
-            invalid += 1;
-            continue;
-        }
-        for c in 0..3 {
-            min[c] = min[c].min(p[c]);
-            max[c] = max[c].max(p[c]);
-            sum[c] += f64::from(p[c]);
-        }
-        let l = luminance(p);
-        if l > 0.0 {
-            lum.push(l);
-        } else {
-            zero += 1;
-        }
-    }
-    let valid = (img.pixel_count() - invalid).max(1) as f64;
-    lum.sort_unstable_by(f32::total_cmp);
-    let q = |f: f64| lum[((lum.len() - 1) as f64 * f).round() as usize];
-    let (dr, dr_robust) = if lum.is_empty() {
+    // One parallel pass in the library: the same statistics the tone mapper exposes with.
+    let st = radiance_stats(img).with_context(|| a.file.display().to_string())?;
+    let (min, max) = (st.min, st.max);
+    let lum = &st.luminance;
+    let (dr, dr_robust) = if lum.count == 0 {
         (None, None)
     } else {
         (
-            Some(f64::from(q(1.0) / q(0.0)).log2()),
-            Some(f64::from(q(0.999) / q(0.001)).log2()),
+            Some(lum.dynamic_range_stops()),
+            Some(lum.robust_range_stops(0.1, 99.9)),
         )
     };
+    let invalid = st.invalid_pixels as usize;
     let info = Info {
         file: a.file.display().to_string(),
         format: r.format,
@@ -85,9 +65,9 @@ pub fn run(a: Args) -> Result<()> {
         meta: r.meta,
         min,
         max,
-        mean: sum.map(|s| s / valid),
+        mean: st.mean,
         invalid_pixels: invalid,
-        zero_pixels: zero,
+        zero_pixels: lum.zero_count as usize,
         dynamic_range_stops: dr,
         dynamic_range_stops_robust: dr_robust,
     };

@@ -33,6 +33,9 @@ pub struct Args {
     /// Black outside this circle (CX,CY,R in pixels).
     #[arg(long, value_parser = crate::calibrate::parse_circle, value_name = "CX,CY,R")]
     pub circle: Option<skydome::image::Circle>,
+    /// Expose for the whole frame, not for the sky inside a detected fish-eye image circle.
+    #[arg(long)]
+    pub whole_frame: bool,
     /// Write a 16-bit PNG.
     #[arg(long)]
     pub sixteen: bool,
@@ -56,6 +59,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         white_percentile: a.white_percentile,
         drago_bias: a.bias,
         mask: a.circle,
+        auto_mask: !a.whole_frame,
         ..ToneMap::default()
     };
     let mut out = Outputs::default();

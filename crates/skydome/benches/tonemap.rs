@@ -1,31 +1,32 @@
-//! Tone-mapping throughput on a 3-megapixel synthetic dome, against a floor: the cheapest
-//! possible 8-bit conversion (`min(v, 1) · 255` per sample, one pass, no curve, no statistics)
-//! over the same buffer. Report `tonemap_u8 / floor` as the ratio.
+//! The preview of a 6-megapixel dome (2448 × 2448 synthetic fish-eye sky with a sun and black
+//! housing): statistics, tone mapping (table-driven fast path against the exact per-pixel
+//! reference), JPEG encoding (`jpeg-encoder`, which skydome uses, against `image`'s encoder),
+//! and the whole preview (tone map + encode), whose target is ≤ 60 ms. A floor — the cheapest
+//! possible 8-bit conversion, `min(v, 1) · 255` per sample in one pass — puts the tone map in
+//! proportion.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use skydome::image::HdrImage;
-use skydome::tonemap::{luminance_stats, tonemap_u8, Operator, ToneMap};
+use skydome::formats::picture::{encode_rgb8, PictureFormat, DEFAULT_JPEG_QUALITY};
+use skydome::image::{Circle, HdrImage};
+use skydome::tonemap::{
+    exposure_circle, luminance_stats, tonemap_u8, tonemap_u8_reference, Operator, ToneMap,
+};
 use std::hint::black_box;
 
-fn dome(w: usize, h: usize) -> HdrImage {
-    let mut img = HdrImage::new(w, h);
-    for y in 0..h {
-        for x in 0..w {
-            let t = (x as f32 / w as f32 - 0.5).powi(2) + (y as f32 / h as f32 - 0.5).powi(2);
-            let sun = if (x as i64 - 1200).pow(2) + (y as i64 - 400).pow(2) < 64 {
-                50_000.0
-            } else {
-                1.0
-            };
-            img.set_pixel(x, y, [0.3 * sun + t, 0.5 * sun + t, 0.9 * sun]);
-        }
-    }
-    img
+fn dome() -> HdrImage {
+    let n = 2448;
+    let c = Circle {
+        cx: n as f64 / 2.0,
+        cy: n as f64 / 2.0,
+        r: 0.48 * n as f64,
+    };
+    skydome::synth::scene(n, n, 7, Some(c))
 }
 
 fn bench(c: &mut Criterion) {
-    let img = dome(2000, 1500);
-    let mut g = c.benchmark_group("tonemap_3mp");
+    let img = dome();
+    let tm = ToneMap::default();
+    let mut g = c.benchmark_group("preview_6mp");
     g.throughput(Throughput::Elements(img.pixel_count() as u64));
     g.sample_size(20);
     g.bench_function("floor_clamp_scale", |b| {
@@ -40,12 +41,52 @@ fn bench(c: &mut Criterion) {
     g.bench_function("stats_only", |b| {
         b.iter(|| black_box(luminance_stats(black_box(&img), None)))
     });
-    for op in [Operator::MinMax, Operator::Reinhard, Operator::Aces] {
-        let tm = ToneMap::with_operator(op);
-        g.bench_function(op.name(), |b| {
-            b.iter(|| black_box(tonemap_u8(black_box(&img), &tm)))
+    g.bench_function("detect_circle_for_exposure", |b| {
+        b.iter(|| black_box(exposure_circle(black_box(&img), &tm)))
+    });
+    g.bench_function("tonemap_u8_aces", |b| {
+        b.iter(|| black_box(tonemap_u8(black_box(&img), &tm)))
+    });
+    g.bench_function("tonemap_u8_aces_reference", |b| {
+        b.iter(|| black_box(tonemap_u8_reference(black_box(&img), &tm)))
+    });
+    for op in [Operator::Reinhard, Operator::Drago] {
+        let t = ToneMap::with_operator(op);
+        g.bench_function(format!("tonemap_u8_{}", op.name()), |b| {
+            b.iter(|| black_box(tonemap_u8(black_box(&img), &t)))
         });
     }
+    let rgb = tonemap_u8(&img, &tm).unwrap();
+    let q = DEFAULT_JPEG_QUALITY;
+    g.bench_function("encode_jpeg_jpeg_encoder", |b| {
+        b.iter(|| {
+            black_box(encode_rgb8(
+                black_box(&rgb),
+                PictureFormat::Jpeg { quality: q },
+            ))
+        })
+    });
+    g.bench_function("encode_jpeg_image_crate", |b| {
+        use image::ImageEncoder;
+        b.iter(|| {
+            let mut out = Vec::new();
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, q)
+                .write_image(
+                    black_box(&rgb.data),
+                    rgb.width as u32,
+                    rgb.height as u32,
+                    image::ExtendedColorType::Rgb8,
+                )
+                .unwrap();
+            black_box(out)
+        })
+    });
+    g.bench_function("preview_tonemap_and_jpeg", |b| {
+        b.iter(|| {
+            let rgb = tonemap_u8(black_box(&img), &tm).unwrap();
+            black_box(encode_rgb8(&rgb, PictureFormat::Jpeg { quality: q }))
+        })
+    });
     g.finish();
 }
 

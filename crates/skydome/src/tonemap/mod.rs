@@ -46,10 +46,35 @@
 //! stay black too: dithering never lifts them. NaN and negative channels count as zero; +∞
 //! counts as brighter than anything else (it maps to white).
 //!
+//! # Sky-keyed exposure
+//! On a fish-eye picture "the whole frame" is the wrong thing to expose for: the black housing
+//! outside the image circle and a dark ground ring pull the log-average down by stops and blow
+//! the sky out. So automatic exposure measures a **region**:
+//! - when [`ToneMap::mask`] is set, or — with [`ToneMap::auto_mask`] (the default) — when the
+//!   picture is clearly fish-eye and its image circle is found on a cheap 8-bit thumbnail
+//!   ([`exposure_circle`] says which), the statistics are **weighted towards the sky**: full
+//!   weight within 0.5 r of the circle's centre (the camera looks up, so that is the sky),
+//!   falling linearly in r² to zero at 0.8 r, nothing beyond — the housing and most of a ground ring
+//!   do not count. A detected circle only steers the exposure; pixels outside it are still
+//!   mapped (only an explicit mask blacks them out);
+//! - otherwise every pixel counts equally (a room, a lat-long map).
+//!
+//! Then, on a sky (a circle is known) under `aces` and `linear` (whose white is fixed, unlike
+//! `reinhard`'s and `drago`'s percentile white point), **highlights are protected**: if the 99th percentile of the weighted
+//! luminance would land above the curve's near-white (`k · P99 > 4` for ACES, display ≈ 0.97,
+//! code ≈ 252; `> 0.95` for linear), `k` is lowered until it does not, but by at most 1.5 stops
+//! so a sunny sky's median stays mid-grey. What clips is then the sun and at most the brightest
+//! 1 % of the sky around it — a small disc, not a blown-out aureole.
+//!
 //! # Speed
-//! One statistics pass (log-average and a 1/32-stop log₂ histogram for percentiles, no copy or
-//! sort of the image) and one mapping pass; both run over row bands with rayon when the
-//! `parallel` feature is on.
+//! One statistics pass (log-average and a 1/32-stop log₂ histogram with a polynomial log₂, no
+//! copy or sort of the image; see [`LuminanceStats`]) and one mapping pass; both run over rows
+//! with rayon when the `parallel` feature is on. The mapping pass does not evaluate the curve
+//! per pixel: the per-pixel gain `s(L) = Ld(k·L) / L` is tabulated once per image at 128 points
+//! per octave of `L` (indexed by the bits of the `f32`, linear interpolation inside a segment,
+//! relative error < 5·10⁻⁵, a hundredth of a code), and the sRGB encoding comes from the 4096-entry table above. The
+//! exact per-pixel formulas stay available as [`tonemap_u8_reference`]; tests bound the
+//! difference (at most one code value, at the 99th percentile none).
 //!
 //! References: E. Reinhard, M. Stark, P. Shirley, J. Ferwerda, "Photographic Tone Reproduction
 //! for Digital Images", SIGGRAPH 2002. F. Drago, K. Myszkowski, T. Annen, N. Chiba, "Adaptive
@@ -64,6 +89,13 @@ use crate::image::{luminance, Circle, HdrImage, RgbImage};
 
 #[cfg(feature = "parallel")]
 use rayon::prelude::*;
+
+mod sky;
+mod stats;
+
+pub(crate) use stats::row_span;
+use stats::{check_image, weighted_stats, Weights};
+pub use stats::{luminance_stats, radiance_stats, LuminanceStats, RadianceStats};
 
 /// Errors from tone mapping. Each message says what to change.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
@@ -179,7 +211,7 @@ pub enum Dither {
 }
 
 /// Tone-mapping settings. `ToneMap::default()` is the preview skydome writes with no flags:
-/// ACES on auto exposure (key 0.18), 99.5th-percentile white, ordered dither.
+/// ACES on sky-keyed auto exposure (key 0.18), 99.5th-percentile white, ordered dither.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ToneMap {
     /// The curve.
@@ -200,7 +232,12 @@ pub struct ToneMap {
     /// Dither for 8-bit output (ignored by 16-bit output and by `minmax`).
     pub dither: Dither,
     /// Only pixels whose centres lie inside this circle are mapped and measured; others are black.
+    /// Automatic exposure weights the pixels inside towards its centre (module docs).
     pub mask: Option<Circle>,
+    /// With `mask: None` and automatic exposure, look for a fish-eye image circle and key the
+    /// exposure on the sky inside it (module docs, "Sky-keyed exposure"). `true` by default;
+    /// `false` measures every pixel equally.
+    pub auto_mask: bool,
 }
 
 impl Default for ToneMap {
@@ -214,6 +251,7 @@ impl Default for ToneMap {
             drago_bias: 0.85,
             dither: Dither::Ordered,
             mask: None,
+            auto_mask: true,
         }
     }
 }
@@ -270,256 +308,6 @@ impl ToneMap {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Statistics
-// ---------------------------------------------------------------------------------------------
-
-/// Histogram range of log₂ luminance: [-64, 64) stops at 1/32 stop per bin.
-const HIST_MIN_LOG2: f64 = -64.0;
-const HIST_BINS_PER_STOP: f64 = 32.0;
-const HIST_BINS: usize = 128 * 32;
-
-/// Luminance statistics over the unmasked pixels with positive, finite luminance.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LuminanceStats {
-    /// Pixels counted (positive, finite luminance, inside the mask).
-    pub count: u64,
-    /// Pixels inside the mask whose luminance is zero (or NaN/negative, treated as zero).
-    pub zero_count: u64,
-    /// Geometric mean `exp(mean(ln L))`, or 0 when `count == 0`.
-    pub log_average: f64,
-    /// Smallest positive luminance (0 when `count == 0`).
-    pub min: f64,
-    /// Largest finite luminance (0 when `count == 0`).
-    pub max: f64,
-    hist: Vec<u64>,
-}
-
-impl LuminanceStats {
-    /// The `p`-th percentile (`p` in percent, clamped to [0, 100]) of positive luminance,
-    /// resolved to 1/32 stop (≈2 %) and clamped to `[min, max]`; 0 when nothing was counted.
-    pub fn percentile(&self, p: f64) -> f64 {
-        if self.count == 0 {
-            return 0.0;
-        }
-        let p = if p.is_nan() {
-            50.0
-        } else {
-            p.clamp(0.0, 100.0)
-        };
-        let target = ((p / 100.0) * self.count as f64).ceil().max(1.0) as u64;
-        let mut acc = 0u64;
-        for (i, &n) in self.hist.iter().enumerate() {
-            acc += n;
-            if acc >= target {
-                let log2 = HIST_MIN_LOG2 + (i as f64 + 0.5) / HIST_BINS_PER_STOP;
-                return log2.exp2().clamp(self.min, self.max);
-            }
-        }
-        self.max
-    }
-
-    /// Counts per 1/32-stop bin of log₂ luminance, starting at 2⁻⁶⁴ (4096 bins; values outside
-    /// [2⁻⁶⁴, 2⁶⁴) are counted in the end bins).
-    pub fn log2_histogram(&self) -> &[u64] {
-        &self.hist
-    }
-
-    /// Dynamic range `log₂(max / min)` in stops (0 when fewer than one positive pixel).
-    pub fn dynamic_range_stops(&self) -> f64 {
-        if self.count == 0 || self.min <= 0.0 {
-            0.0
-        } else {
-            (self.max / self.min).log2()
-        }
-    }
-
-    /// `log₂(P_hi / P_lo)` between two percentiles, the range that survives a few hot or dead
-    /// pixels.
-    pub fn robust_range_stops(&self, lo: f64, hi: f64) -> f64 {
-        let (a, b) = (self.percentile(lo), self.percentile(hi));
-        if a > 0.0 && b > 0.0 {
-            (b / a).log2()
-        } else {
-            0.0
-        }
-    }
-}
-
-#[derive(Clone)]
-struct Acc {
-    count: u64,
-    inf: u64,
-    zero: u64,
-    sum_log2: f64,
-    min: f64,
-    max: f64,
-    hist: Vec<u64>,
-}
-
-impl Acc {
-    fn new() -> Self {
-        Self {
-            count: 0,
-            inf: 0,
-            zero: 0,
-            sum_log2: 0.0,
-            min: f64::INFINITY,
-            max: 0.0,
-            hist: vec![0; HIST_BINS],
-        }
-    }
-    fn add(&mut self, l: f32) {
-        if l > 0.0 && l.is_finite() {
-            // f32 log2 is several times cheaper than f64 ln and exact enough for a 1/32-stop
-            // histogram and a mean of logs accumulated in f64.
-            let lg = l.log2() as f64;
-            self.count += 1;
-            self.sum_log2 += lg;
-            let l = l as f64;
-            self.min = self.min.min(l);
-            self.max = self.max.max(l);
-            let bin = ((lg - HIST_MIN_LOG2) * HIST_BINS_PER_STOP).clamp(0.0, (HIST_BINS - 1) as f64)
-                as usize;
-            self.hist[bin] += 1;
-        } else if l == f32::INFINITY {
-            // Counted as the brightest possible value: it belongs at the top of the histogram,
-            // but must not poison the mean.
-            self.count += 1;
-            self.inf += 1;
-            self.hist[HIST_BINS - 1] += 1;
-        } else {
-            self.zero += 1;
-        }
-    }
-    #[cfg(feature = "parallel")]
-    fn merge(mut self, o: Acc) -> Acc {
-        self.count += o.count;
-        self.inf += o.inf;
-        self.zero += o.zero;
-        self.sum_log2 += o.sum_log2;
-        self.min = self.min.min(o.min);
-        self.max = self.max.max(o.max);
-        for (a, b) in self.hist.iter_mut().zip(&o.hist) {
-            *a += b;
-        }
-        self
-    }
-}
-
-#[inline]
-fn sanitize(rgb: [f32; 3]) -> [f32; 3] {
-    // `max` drops NaN in favour of 0 and clamps negatives.
-    [rgb[0].max(0.0), rgb[1].max(0.0), rgb[2].max(0.0)]
-}
-
-fn check_image<T>(img: &RgbImage<T>) -> Result<(), TonemapError> {
-    let expected = img
-        .width
-        .checked_mul(img.height)
-        .and_then(|n| n.checked_mul(3));
-    if expected != Some(img.data.len()) {
-        return Err(TonemapError::BadBuffer {
-            width: img.width,
-            height: img.height,
-            len: img.data.len(),
-            expected: expected.unwrap_or(usize::MAX),
-        });
-    }
-    if img.width == 0 || img.height == 0 {
-        return Err(TonemapError::EmptyImage);
-    }
-    Ok(())
-}
-
-/// Row mask: the `[x0, x1)` span of row `y` inside the circle (the whole row without a mask).
-#[inline]
-pub(crate) fn row_span(mask: Option<&Circle>, width: usize, y: usize) -> (usize, usize) {
-    match mask {
-        None => (0, width),
-        Some(c) => {
-            let dy = y as f64 + 0.5 - c.cy;
-            let h2 = c.r * c.r - dy * dy;
-            if h2 < 0.0 {
-                return (0, 0);
-            }
-            let h = h2.sqrt();
-            // Pixel centres x + 0.5 within [cx - h, cx + h].
-            let x0 = (c.cx - h - 0.5).ceil().max(0.0);
-            let x1 = (c.cx + h - 0.5).floor() + 1.0;
-            let x0 = (x0 as usize).min(width);
-            let x1 = (x1.max(0.0) as usize).min(width);
-            (x0, x1.max(x0))
-        }
-    }
-}
-
-/// Luminance statistics of `img` over the pixels inside `mask` (all pixels when `None`).
-pub fn luminance_stats(
-    img: &HdrImage,
-    mask: Option<&Circle>,
-) -> Result<LuminanceStats, TonemapError> {
-    check_image(img)?;
-    let w = img.width;
-    let row_acc = |acc: &mut Acc, (y, row): (usize, &[f32])| {
-        let (x0, x1) = row_span(mask, w, y);
-        for px in row[3 * x0..3 * x1].chunks_exact(3) {
-            let rgb = [px[0], px[1], px[2]];
-            let l = if rgb.contains(&f32::INFINITY) {
-                f32::INFINITY
-            } else {
-                luminance(sanitize(rgb))
-            };
-            acc.add(l);
-        }
-    };
-    #[cfg(feature = "parallel")]
-    let acc = {
-        // Bands of rows keep the per-thread histogram count small.
-        let band = (img.height / 16).max(1);
-        img.data
-            .par_chunks(3 * w * band)
-            .enumerate()
-            .map(|(b, chunk)| {
-                let mut acc = Acc::new();
-                for (i, row) in chunk.chunks_exact(3 * w).enumerate() {
-                    row_acc(&mut acc, (b * band + i, row));
-                }
-                acc
-            })
-            .reduce(Acc::new, Acc::merge)
-    };
-    #[cfg(not(feature = "parallel"))]
-    let acc = {
-        let mut acc = Acc::new();
-        for (y, row) in img.data.chunks_exact(3 * w).enumerate() {
-            row_acc(&mut acc, (y, row));
-        }
-        acc
-    };
-    Ok(finish(acc))
-}
-
-fn finish(acc: Acc) -> LuminanceStats {
-    let finite = acc.count - acc.inf;
-    LuminanceStats {
-        count: acc.count,
-        zero_count: acc.zero,
-        log_average: if finite > 0 {
-            (acc.sum_log2 / finite as f64).exp2()
-        } else {
-            0.0
-        },
-        min: if acc.count > 0 && acc.min.is_finite() {
-            acc.min
-        } else {
-            0.0
-        },
-        max: acc.max,
-        hist: acc.hist,
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
 // sRGB encoding
 // ---------------------------------------------------------------------------------------------
 
@@ -559,6 +347,26 @@ fn srgb_lut() -> &'static [f32; LUT_SIZE + 1] {
     })
 }
 
+/// [`srgb_lut`] times 255, for 8-bit output.
+fn srgb_lut255() -> &'static [f32; LUT_SIZE + 1] {
+    static LUT: OnceLock<Box<[f32; LUT_SIZE + 1]>> = OnceLock::new();
+    LUT.get_or_init(|| {
+        let mut t = Box::new([0.0f32; LUT_SIZE + 1]);
+        for (i, v) in t.iter_mut().enumerate() {
+            *v = 255.0 * srgb_encode(i as f32 / LUT_SIZE as f32);
+        }
+        t
+    })
+}
+
+#[inline(always)]
+fn srgb_fast255(lut: &[f32; LUT_SIZE + 1], x: f32) -> f32 {
+    let f = x.clamp(0.0, 1.0) * LUT_SIZE as f32;
+    let i = (f as usize).min(LUT_SIZE - 1);
+    let t = f - i as f32;
+    lut[i] + (lut[i + 1] - lut[i]) * t
+}
+
 #[inline]
 fn srgb_fast(lut: &[f32; LUT_SIZE + 1], x: f32) -> f32 {
     let f = x.clamp(0.0, 1.0) * LUT_SIZE as f32;
@@ -586,18 +394,35 @@ struct Curve {
 }
 
 impl Curve {
-    fn new(tm: &ToneMap, stats: &LuminanceStats) -> Result<Self, TonemapError> {
-        let k = match tm.exposure {
-            ExposureMode::Ev(ev) => ev.exp2(),
-            ExposureMode::Auto => {
-                if stats.log_average <= 0.0 {
-                    return Err(TonemapError::NothingToExpose);
+    fn new(
+        tm: &ToneMap,
+        stats: Option<&LuminanceStats>,
+        protect_highlights: bool,
+    ) -> Result<Self, TonemapError> {
+        let k = match (tm.exposure, stats) {
+            (ExposureMode::Ev(ev), _) => ev.exp2(),
+            (ExposureMode::Auto, Some(stats)) if stats.log_average > 0.0 => {
+                let k = tm.key / stats.log_average;
+                // Highlight protection (module docs): the weighted 99th percentile stays below
+                // the curve's near-white, giving up at most 1.5 stops.
+                let near_white = match tm.operator {
+                    Operator::Aces if protect_highlights => Some(4.0),
+                    Operator::Linear if protect_highlights => Some(0.95),
+                    _ => None,
+                };
+                match near_white {
+                    Some(x) => {
+                        let p99 = stats.percentile(HIGHLIGHT_PERCENTILE);
+                        let limit = if p99 > 0.0 { x / p99 } else { k };
+                        k.min(limit).max(k * (-MAX_HIGHLIGHT_PULL_STOPS).exp2())
+                    }
+                    None => k,
                 }
-                tm.key / stats.log_average
             }
+            (ExposureMode::Auto, _) => return Err(TonemapError::NothingToExpose),
         };
         // A white point below the key would invert the meaning of the curve; keep it ≥ 1.
-        let pct = (k * stats.percentile(tm.white_percentile)).max(1.0);
+        let pct = stats.map_or(1.0, |s| (k * s.percentile(tm.white_percentile)).max(1.0));
         let white = tm.reinhard_white.unwrap_or(pct);
         let lmax = pct;
         Ok(Self {
@@ -608,6 +433,20 @@ impl Curve {
             drago_scale: (1.0 / (lmax + 1.0).log10()) as f32,
             drago_exp: (tm.drago_bias.ln() / 0.5f64.ln()) as f32,
         })
+    }
+
+    /// [`Curve::compress`] in f64, for building the table.
+    fn compress64(&self, ls: f64) -> f64 {
+        match self.op {
+            Operator::Linear | Operator::MinMax => ls,
+            Operator::Reinhard => ls * (1.0 + ls * f64::from(self.inv_white2)) / (1.0 + ls),
+            Operator::Drago => {
+                let r = (ls * f64::from(self.inv_lmax)).min(1.0);
+                f64::from(self.drago_scale) * ls.ln_1p()
+                    / (2.0 + 8.0 * r.powf(f64::from(self.drago_exp))).ln()
+            }
+            Operator::Aces => ls * (2.51 * ls + 0.03) / (ls * (2.43 * ls + 0.59) + 0.14),
+        }
     }
 
     /// Scaled luminance → display luminance.
@@ -633,7 +472,8 @@ impl Curve {
         if rgb.contains(&f32::INFINITY) {
             return [1.0; 3];
         }
-        let rgb = sanitize(rgb);
+        // `max` drops NaN in favour of 0 and clamps negatives.
+        let rgb = rgb.map(|v| v.max(0.0));
         let l = luminance(rgb);
         if l <= 0.0 {
             return [0.0; 3];
@@ -670,10 +510,48 @@ pub fn tonemap_display(img: &HdrImage, tm: &ToneMap) -> Result<HdrImage, Tonemap
     map_rows(img, tm.mask.as_ref(), |rgb, _, _| curve.map(rgb))
 }
 
+/// Percentile of weighted luminance kept below near-white by the highlight protection.
+const HIGHLIGHT_PERCENTILE: f64 = 99.0;
+/// The most the highlight protection lowers the exposure, in stops.
+const MAX_HIGHLIGHT_PULL_STOPS: f64 = 1.5;
+
+/// The circle automatic exposure keys on for `img` under `tm`: `tm.mask` when set, else (with
+/// `tm.auto_mask`) a detected fish-eye image circle, else `None` (every pixel counts). Pixel
+/// coordinates as in [`crate::image`]. `None` too under a fixed exposure.
+pub fn exposure_circle(img: &HdrImage, tm: &ToneMap) -> Option<Circle> {
+    if tm.exposure != ExposureMode::Auto || tm.operator == Operator::MinMax {
+        return None;
+    }
+    tm.mask
+        .or_else(|| tm.auto_mask.then(|| sky::detect_dome(img)).flatten())
+}
+
 fn prepare(img: &HdrImage, tm: &ToneMap) -> Result<Curve, TonemapError> {
     tm.validate()?;
-    let stats = luminance_stats(img, tm.mask.as_ref())?;
-    Curve::new(tm, &stats)
+    check_image(img)?;
+    let needs_stats = tm.exposure == ExposureMode::Auto
+        || matches!(tm.operator, Operator::Reinhard | Operator::Drago);
+    if !needs_stats {
+        return Curve::new(tm, None, false);
+    }
+    let circle = exposure_circle(img, tm);
+    let weights = match circle {
+        Some(circle) => Weights::Radial {
+            circle,
+            inner: sky::INNER,
+            outer: sky::OUTER,
+            // A quarter of the pixels of a large dome is still millions of samples: the
+            // log-average and the 99th percentile do not move, the pass costs a quarter.
+            stride: if img.pixel_count() >= 1 << 20 { 2 } else { 1 },
+        },
+        None => Weights::Uniform(tm.mask),
+    };
+    let mut stats = weighted_stats(img, weights)?;
+    if stats.count == 0 && matches!(weights, Weights::Radial { .. }) {
+        // Everything lit lies in the rim: measure the whole circle (or frame) instead.
+        stats = weighted_stats(img, Weights::Uniform(tm.mask))?;
+    }
+    Curve::new(tm, Some(&stats), circle.is_some())
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -819,17 +697,81 @@ fn dither_offsets(d: Dither, x: usize, y: usize) -> [f32; 3] {
 
 /// Tone-maps to 8-bit sRGB (or, for `minmax`, the seed's linear stretch), with dithering.
 ///
-/// Pixels outside `tm.mask` and pixels that are exactly zero stay `(0, 0, 0)`.
+/// Pixels outside `tm.mask` and pixels that are exactly zero stay `(0, 0, 0)`. The curve comes
+/// from a per-image table (module docs, "Speed"); [`tonemap_u8_reference`] evaluates the same
+/// formulas exactly, per pixel, and differs by at most one code value.
 pub fn tonemap_u8(img: &HdrImage, tm: &ToneMap) -> Result<RgbImage<u8>, TonemapError> {
     if tm.operator == Operator::MinMax {
-        let (lo, hi) = channel_range(img, tm)?;
-        return map_rows(img, tm.mask.as_ref(), |rgb, _, _| {
-            let u = minmax_unit(rgb, &lo, &hi);
-            u.map(|v| (v * 255.0).round() as u8)
-        });
+        return minmax_u8(img, tm);
     }
     let curve = prepare(img, tm)?;
-    let lut = srgb_lut();
+    let lut = CurveLut::new(curve);
+    let srgb = srgb_lut255();
+    let dither = tm.dither;
+    let mask = tm.mask;
+    let w = img.width;
+    let mut out = RgbImage::<u8>::new(w, img.height);
+    let (lut, srgb) = (&lut, srgb);
+    let row_fn = |(y, (orow, irow)): (usize, (&mut [u8], &[f32]))| {
+        let (x0, x1) = row_span(mask.as_ref(), w, y);
+        let src = &irow[3 * x0..3 * x1];
+        let dst = &mut orow[3 * x0..3 * x1];
+        match dither {
+            Dither::Ordered => {
+                // The Bayer row, with the +½ of rounding folded in.
+                let bayer = BAYER8[y & 7].map(|b| (b as f32 + 0.5) / 64.0);
+                map_row_u8(lut, srgb, src, dst, |i| [bayer[(x0 + i) & 7]; 3]);
+            }
+            other => map_row_u8(lut, srgb, src, dst, |i| {
+                dither_offsets(other, x0 + i, y).map(|o| o + 0.5)
+            }),
+        }
+    };
+    #[cfg(feature = "parallel")]
+    out.data
+        .par_chunks_mut(3 * w)
+        .zip(img.data.par_chunks(3 * w))
+        .enumerate()
+        .for_each(row_fn);
+    #[cfg(not(feature = "parallel"))]
+    out.data
+        .chunks_mut(3 * w)
+        .zip(img.data.chunks(3 * w))
+        .enumerate()
+        .for_each(row_fn);
+    Ok(out)
+}
+
+/// The inner loop of [`tonemap_u8`] over one row span; `offset(i)` is the dither of the `i`-th
+/// pixel of the span plus ½ (rounding).
+#[inline(always)]
+fn map_row_u8(
+    lut: &CurveLut,
+    srgb: &[f32; LUT_SIZE + 1],
+    src: &[f32],
+    dst: &mut [u8],
+    offset: impl Fn(usize) -> [f32; 3],
+) {
+    for (i, (p, o)) in src.chunks_exact(3).zip(dst.chunks_exact_mut(3)).enumerate() {
+        let rgb = [p[0].max(0.0), p[1].max(0.0), p[2].max(0.0)];
+        let Some(d) = lut.map(rgb) else {
+            continue;
+        };
+        let off = offset(i);
+        for c in 0..3 {
+            o[c] = (srgb_fast255(srgb, d[c]) + off[c]).clamp(0.0, 255.0) as u8;
+        }
+    }
+}
+
+/// [`tonemap_u8`] with every formula evaluated exactly per pixel (the curve in full, the sRGB
+/// transfer function with `powf`): the specification the fast path is tested against. Same
+/// exposure, same dither, several times slower.
+pub fn tonemap_u8_reference(img: &HdrImage, tm: &ToneMap) -> Result<RgbImage<u8>, TonemapError> {
+    if tm.operator == Operator::MinMax {
+        return minmax_u8(img, tm);
+    }
+    let curve = prepare(img, tm)?;
     let dither = tm.dither;
     map_rows(img, tm.mask.as_ref(), |rgb, x, y| {
         let d = curve.map(rgb);
@@ -837,9 +779,93 @@ pub fn tonemap_u8(img: &HdrImage, tm: &ToneMap) -> Result<RgbImage<u8>, TonemapE
             return [0; 3];
         }
         let off = dither_offsets(dither, x, y);
-        let q = |c: usize| (srgb_fast(lut, d[c]) * 255.0 + 0.5 + off[c]).clamp(0.0, 255.0) as u8;
+        let q = |c: usize| (srgb_encode(d[c]) * 255.0 + 0.5 + off[c]).clamp(0.0, 255.0) as u8;
         [q(0), q(1), q(2)]
     })
+}
+
+fn minmax_u8(img: &HdrImage, tm: &ToneMap) -> Result<RgbImage<u8>, TonemapError> {
+    let (lo, hi) = channel_range(img, tm)?;
+    map_rows(img, tm.mask.as_ref(), |rgb, _, _| {
+        let u = minmax_unit(rgb, &lo, &hi);
+        u.map(|v| (v * 255.0).round() as u8)
+    })
+}
+
+/// Segments per octave of luminance in [`CurveLut`] (2⁷ = 128).
+const LUT_SEG_BITS: u32 = 7;
+const LUT_SHIFT: u32 = 23 - LUT_SEG_BITS;
+/// Octaves of scaled luminance `k·L` the table spans: 2⁻⁴⁰ … 2²⁴. Below, every curve is linear
+/// to within 10⁻¹² (the first entry is used); above, the exact formula runs.
+const LUT_LOW_LOG2: i32 = -40;
+const LUT_OCTAVES: i32 = 64;
+
+/// A [`Curve`] tabulated over luminance: `s(L) = Ld(k·L) / L` at `L_i`, the `f32` values whose
+/// bit patterns step by 2¹⁶ (128 per octave). Between two of them the mantissa — so `L` itself —
+/// moves linearly, and `s` is interpolated linearly in `L`.
+struct CurveLut {
+    curve: Curve,
+    lo_bits: u32,
+    s: Vec<f32>,
+}
+
+impl CurveLut {
+    fn new(curve: Curve) -> Self {
+        let k = f64::from(curve.k);
+        // Lowest tabulated L: a power of two at or below 2^LUT_LOW_LOG2 / k, a normal f32.
+        let e_lo =
+            ((f64::from(LUT_LOW_LOG2) - k.log2()).floor() as i32).clamp(-126, 127 - LUT_OCTAVES);
+        let lo_bits = ((e_lo + 127) as u32) << 23;
+        let n = ((LUT_OCTAVES as u32) << LUT_SEG_BITS) as usize + 1;
+        let s = (0..n)
+            .map(|i| {
+                let l = f64::from(f32::from_bits(lo_bits + ((i as u32) << LUT_SHIFT)));
+                (curve.compress64(k * l) / l) as f32
+            })
+            .collect();
+        Self { curve, lo_bits, s }
+    }
+
+    /// The gain `s(L)` for positive, finite `l`.
+    #[inline(always)]
+    fn gain(&self, l: f32) -> f32 {
+        let b = l.to_bits();
+        let d = b.saturating_sub(self.lo_bits);
+        let i = (d >> LUT_SHIFT) as usize;
+        if i + 1 >= self.s.len() {
+            return self.curve.compress(self.curve.k * l) / l;
+        }
+        let t = (d & ((1 << LUT_SHIFT) - 1)) as f32 * (1.0 / (1u32 << LUT_SHIFT) as f32);
+        let (a, b) = (self.s[i], self.s[i + 1]);
+        a + (b - a) * t
+    }
+
+    /// [`Curve::map`] through the table for sanitised (non-negative, NaN-free) `rgb`; `None`
+    /// for zero luminance (the pixel stays black).
+    #[inline(always)]
+    fn map(&self, rgb: [f32; 3]) -> Option<[f32; 3]> {
+        let l = luminance(rgb);
+        if l <= 0.0 {
+            return None;
+        }
+        if l == f32::INFINITY {
+            return Some([1.0; 3]);
+        }
+        let s = self.gain(l);
+        let ld = s * l;
+        if ld >= 1.0 || ld.is_nan() {
+            return Some([1.0; 3]);
+        }
+        let mut out = [rgb[0] * s, rgb[1] * s, rgb[2] * s];
+        let m = out[0].max(out[1]).max(out[2]);
+        if m > 1.0 {
+            let t = (1.0 - ld) / (m - ld);
+            for c in &mut out {
+                *c = ld + (*c - ld) * t;
+            }
+        }
+        Some(out)
+    }
 }
 
 /// Tone-maps to 16-bit sRGB-encoded samples (no dither: 16 bits do not band). `minmax` gives
@@ -876,33 +902,36 @@ mod tests {
     }
 
     #[test]
-    fn mask_row_span_matches_contains_pixel() {
-        let c = Circle {
-            cx: 10.3,
-            cy: 7.9,
-            r: 6.2,
-        };
-        for y in 0..20 {
-            let (x0, x1) = row_span(Some(&c), 25, y);
-            for x in 0..25 {
-                assert_eq!((x0..x1).contains(&x), c.contains_pixel(x, y), "({x},{y})");
+    fn curve_table_matches_the_exact_curve_to_5e5() {
+        for op in [
+            Operator::Linear,
+            Operator::Reinhard,
+            Operator::Drago,
+            Operator::Aces,
+        ] {
+            for k in [1e-6f32, 0.37, 3.0, 5e4] {
+                let curve = Curve {
+                    op,
+                    k,
+                    inv_white2: 1.0 / 900.0,
+                    inv_lmax: 1.0 / 30.0,
+                    drago_scale: (1.0 / 31f64.log10()) as f32,
+                    drago_exp: (0.85f64.ln() / 0.5f64.ln()) as f32,
+                };
+                let lut = CurveLut::new(curve);
+                let mut l = 1e-9f32 / k;
+                while l < 1e4 / k {
+                    let exact = curve.compress64(f64::from(k) * f64::from(l)) / f64::from(l);
+                    let got = f64::from(lut.gain(l));
+                    // At and beyond display white every pixel is white: nothing to compare.
+                    let white = exact * f64::from(l) >= 1.0;
+                    assert!(
+                        white || (got / exact - 1.0).abs() < 5e-5,
+                        "{op} k {k} L {l}: {got} vs {exact}"
+                    );
+                    l *= 1.0137;
+                }
             }
         }
-    }
-
-    #[test]
-    fn percentile_resolves_to_a_thirty_second_of_a_stop() {
-        let data: Vec<f32> = (1..=1000)
-            .flat_map(|i| {
-                let v = i as f32;
-                [v, v, v]
-            })
-            .collect();
-        let img = HdrImage::from_vec(1000, 1, data).unwrap();
-        let s = luminance_stats(&img, None).unwrap();
-        let p = s.percentile(50.0);
-        assert!((p / 500.0 - 1.0).abs() < 0.025, "median {p}");
-        assert_eq!(s.count, 1000);
-        assert!((s.max - 1000.0).abs() < 1e-3 && (s.min - 1.0).abs() < 1e-6);
     }
 }

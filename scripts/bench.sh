@@ -1,0 +1,130 @@
+#!/usr/bin/env bash
+# The end-to-end speed benchmark of issue #11. From the repository root:
+#
+#   scripts/bench.sh            # ≥ 5 alternating runs on 3 × 2448² JPEGs, then the scaling table
+#   scripts/bench.sh --quick    # the same, with a smaller scaling table (up to 24 MP)
+#   scripts/bench.sh --runs 9 --no-scaling
+#
+# (1) `skydome merge A B C -o s.hdr --preview s.jpg` (calibration from the frames, preview on),
+# (2) the decode floor: the same three JPEGs decoded by libjpeg-turbo through Pillow, one thread,
+# (3) OpenCV's equivalent pipeline in Python (scripts/bench_helper.py opencv),
+# run alternately, each a whole process timed by /usr/bin/time (wall clock and peak resident
+# memory). Prints medians, skydome/floor and OpenCV/skydome, and each one's peak memory; then
+# `skydome merge` (no preview) at 3, 5 and 9 frames × 6, 12, 24 and 50 MP.
+#
+# Needs python3 with venv, and /usr/bin/time (Debian: apt-get install time). The Python packages
+# (numpy, opencv-python-headless, Pillow) go into a virtual environment, $SKYDOME_BENCH_VENV or
+# target/bench-venv. Scratch files go to $SKYDOME_BENCH_DIR or target/bench. The machine should be
+# otherwise idle: other processes inflate every figure.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+RUNS=5
+QUICK=0
+SCALING=1
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --quick) QUICK=1 ;;
+    --runs) RUNS="$2"; shift ;;
+    --no-scaling) SCALING=0 ;;
+    -h|--help) sed -n '2,20p' "$0"; exit 0 ;;
+    *) echo "bench.sh: unknown option $1 (use --quick, --runs N, --no-scaling)" >&2; exit 2 ;;
+  esac
+  shift
+done
+if [ "$RUNS" -lt 5 ]; then echo "bench.sh: use at least 5 runs" >&2; exit 2; fi
+[ -x /usr/bin/time ] || { echo "bench.sh: /usr/bin/time is missing (apt-get install time)" >&2; exit 1; }
+
+WORK="${SKYDOME_BENCH_DIR:-$PWD/target/bench}"
+VENV="${SKYDOME_BENCH_VENV:-$PWD/target/bench-venv}"
+mkdir -p "$WORK"
+
+echo "building skydome (release)…" >&2
+cargo build --release -q -p skydome-cli
+SKYDOME="$PWD/target/release/skydome"
+
+if [ ! -x "$VENV/bin/python" ]; then
+  python3 -m venv "$VENV"
+fi
+"$VENV/bin/pip" install --quiet --disable-pip-version-check numpy opencv-python-headless Pillow
+PY="$VENV/bin/python"
+HELPER="$PWD/scripts/bench_helper.py"
+
+# synth SIZE EVS DIR: a synthetic fish-eye bracket (JPEG frames, times.txt), made once.
+synth() {
+  local size="$1" evs="$2" dir="$3"
+  if [ ! -f "$dir/times.txt" ]; then
+    mkdir -p "$dir"
+    "$SKYDOME" synth -o "$dir" --size "$size" --evs="$evs" --seed 1 --quiet --force
+  fi
+}
+frames_of() { awk -v d="$1" '!/^#/ && NF {printf "%s/%s ", d, $1}' "$1/times.txt"; }
+times_of() { awk '!/^#/ && NF {printf "%s%s", (n++?",":""), $2}' "$1/times.txt"; }
+
+# timed NAME CMD...: runs CMD once under /usr/bin/time, appends "wall_s peak_kB user_s sys_s" to
+# $WORK/NAME.txt.
+timed() {
+  local name="$1"; shift
+  /usr/bin/time -f "%e %M %U %S" -o "$WORK/.time" "$@" >/dev/null 2>"$WORK/.stderr" || {
+    echo "bench.sh: $name failed:" >&2; cat "$WORK/.stderr" >&2; exit 1; }
+  cat "$WORK/.time" >> "$WORK/$name.txt"
+}
+
+# --- The head-to-head on 3 × 2448² ------------------------------------------------------------
+B="$WORK/bracket_2448_3"
+synth 2448 "-2,0,2" "$B"
+FRAMES=$(frames_of "$B")
+TIMES=$(times_of "$B")
+rm -f "$WORK"/skydome.txt "$WORK"/floor.txt "$WORK"/opencv.txt
+echo "3 × 2448² JPEG frames, $RUNS alternating runs of each…" >&2
+for i in $(seq "$RUNS"); do
+  # shellcheck disable=SC2086
+  timed skydome "$SKYDOME" merge $FRAMES --times "$TIMES" -o "$WORK/s.hdr" --preview "$WORK/s.jpg" --force --quiet
+  # shellcheck disable=SC2086
+  timed floor "$PY" "$HELPER" decode $FRAMES
+  # shellcheck disable=SC2086
+  timed opencv "$PY" "$HELPER" opencv "$WORK" "$TIMES" $FRAMES
+done
+
+"$PY" - "$WORK" <<'EOF'
+import statistics, sys, os
+w = sys.argv[1]
+def load(n):
+    rows = [l.split() for l in open(os.path.join(w, n + ".txt")) if l.strip()]
+    wall = statistics.median(float(r[0]) for r in rows)
+    cpu = statistics.median(float(r[2]) + float(r[3]) for r in rows)
+    return wall, max(int(r[1]) for r in rows) / 1024, cpu, len(rows)
+s, f, o = load("skydome"), load("floor"), load("opencv")
+print(f"{'3 × 2448² (6 MP) JPEGs':46} {'median wall':>12} {'median CPU':>11} {'peak memory':>12}")
+for name, v in [("skydome merge --preview (calibrating)", s),
+                ("decode floor (Pillow/libjpeg-turbo, 1 thread)", f),
+                ("OpenCV (Debevec calibrate+merge, Reinhard)", o)]:
+    print(f"{name:46} {v[0]:10.3f} s {v[2]:9.3f} s {v[1]:9.0f} MB")
+print(f"runs: {s[3]} each, alternating; CPU = user + system time of the process (all threads)")
+print(f"skydome / decode floor = {s[0] / f[0]:.2f} wall, {s[2] / f[2]:.2f} CPU   (target ≤ 1.5)")
+print(f"OpenCV / skydome       = {o[0] / s[0]:.1f} wall, {o[2] / s[2]:.1f} CPU    (target ≥ 10)")
+EOF
+
+# --- Scaling: frames × megapixels ---------------------------------------------------------------
+[ "$SCALING" = 1 ] || exit 0
+if [ "$QUICK" = 1 ]; then SIZES="2448 3464 4899"; else SIZES="2448 3464 4899 7071"; fi
+echo >&2
+echo "scaling: skydome merge (calibrating, no preview), one run per cell…" >&2
+printf "%-10s %-8s %10s %12s %14s\n" "size" "frames" "wall" "peak memory" "ns/(px·frame)"
+for size in $SIZES; do
+  for n in 3 5 9; do
+    case "$n" in 3) evs="-2,0,2" ;; 5) evs="-2,-1,0,1,2" ;; 9) evs="-4,-3,-2,-1,0,1,2,3,4" ;; esac
+    if [ "$QUICK" = 1 ] && [ "$size" = 4899 ] && [ "$n" != 3 ]; then continue; fi
+    d="$WORK/bracket_${size}_$n"
+    synth "$size" "$evs" "$d"
+    rm -f "$WORK/scale.txt"
+    # shellcheck disable=SC2046
+    timed scale "$SKYDOME" merge $(frames_of "$d") --times "$(times_of "$d")" -o "$WORK/scale.hdr" --force --quiet
+    read -r wall kb _ < "$WORK/scale.txt"
+    mp=$(awk -v s="$size" 'BEGIN{printf "%.0f", s*s/1e6}')
+    awk -v s="$size" -v n="$n" -v w="$wall" -v k="$kb" -v mp="$mp" \
+      'BEGIN{printf "%-10s %-8s %8.2f s %9.0f MB %14.1f\n", s "² (" mp " MP)", n, w, k/1024, w*1e9/(s*s*n)}'
+    # 50 MP brackets are ~0.5–1.3 GB of JPEG; keep only the 6 MP ones between runs.
+    if [ "$size" != 2448 ]; then rm -rf "$d"; fi
+  done
+done
