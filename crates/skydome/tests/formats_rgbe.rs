@@ -216,7 +216,8 @@ fn full_meta() -> HdrMeta {
                 y: 1.5,
             },
             azimuth_deg: Some(123.45),
-            elevation_deg: Some(34.56000000001),
+            // Sun angles are written to micro-degrees (the same text on every platform).
+            elevation_deg: Some(34.560001),
         }),
         north: Some(PixelPoint { x: 15.5, y: 0.5 }),
         software: Some("skydome-test 9.9".into()),
@@ -279,7 +280,7 @@ fn header_lines_are_written_as_specified() {
         "GMT=2024:06:21 12:03:59",
         "VIEW= -vta -vh 180 -vv 180",
         "#SUN=-Y 1.5 +X 12.456789",
-        "#SUN_DIRECTION= azimuth 123.45 elevation 34.56000000001 (degrees, azimuth from north towards east)",
+        "#SUN_DIRECTION= azimuth 123.45 elevation 34.560001 (degrees, azimuth from north towards east)",
         "#NORTH=-Y 0.5 +X 15.5",
         "# a comment",
     ] {

@@ -1,6 +1,6 @@
-//! Fish-eye lens geometry, one concept per module: radial projections `r(θ)` ([`projection`]),
-//! lens fitting from measurements ([`fit`]), the visible image circle ([`circle`]) and the crop
-//! to the 180° sky-dome ([`crop`]). Lens profiles (JSON) are in [`crate::formats::lens_profile`].
+//! Fish-eye lens geometry, one concept per module: radial projections `r(θ)` (`projection`),
+//! lens fitting from measurements (`fit`), the visible image circle (`circle`) and the crop
+//! to the 180° sky-dome (`crop`). Lens profiles (JSON) are in [`crate::formats::lens_profile`].
 //!
 //! # Conventions
 //! - Pixels: origin top-left, `x` right, `y` down, pixel `(x, y)` centred at `(x + 0.5, y + 0.5)`

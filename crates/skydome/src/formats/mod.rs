@@ -4,10 +4,12 @@
 //! - [`rgbe`]: Radiance RGBE `.hdr` (reader: flat, old-style and new-style RLE, `#?RADIANCE`
 //!   and `#?RGBE`; writer: new-style RLE with skydome's header lines).
 //! - [`exr`]: OpenEXR RGB half/float with the same metadata as string attributes.
+//! - [`camera_profile`], [`lens_profile`]: the JSON profiles of a camera and a lens.
 //! - [`picture`]: 8-bit JPEG/PNG and 16-bit PNG display pictures (previews, overlays, maps).
 
 use crate::image::HdrImage;
 
+pub mod camera_profile;
 pub mod exr;
 pub mod lens_profile;
 pub mod picture;

@@ -514,12 +514,15 @@ fn sun_direction_text(s: &SunMark) -> Option<String> {
     if s.azimuth_deg.is_none() && s.elevation_deg.is_none() {
         return None;
     }
+    // Micro-degrees: far below any measurement's accuracy, and the same text whichever
+    // platform's sin/cos computed the angle (the phone's wasm build and the laptop agree).
+    let deg = |x: f64| fmt_num((x * 1e6).round() / 1e6 + 0.0);
     let mut t = String::new();
     if let Some(a) = s.azimuth_deg {
-        t.push_str(&format!(" azimuth {}", fmt_num(a)));
+        t.push_str(&format!(" azimuth {}", deg(a)));
     }
     if let Some(e) = s.elevation_deg {
-        t.push_str(&format!(" elevation {}", fmt_num(e)));
+        t.push_str(&format!(" elevation {}", deg(e)));
     }
     t.push_str(" (degrees, azimuth from north towards east)");
     Some(t)

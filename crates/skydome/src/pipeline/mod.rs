@@ -6,7 +6,7 @@
 //! [`Progress`]. The product's rules live here, once:
 //!
 //! 1. **decode** the frames ([`Frames::Encoded`]; JPEG, PNG, TIFF) and validate the
-//!    [`Bracket`](crate::bracket::Bracket) (exposure times from EXIF unless [`Input::times`]);
+//!    [`bracket::Bracket`] (exposure times from EXIF unless [`Input::times`]);
 //! 2. **lens**: a given [`LensProfile`], or the image circle detected on the best-exposed frame
 //!    and modelled with the nominal projection and field of view ([`LensSource`]);
 //! 3. **response**: a camera profile, or calibration on these frames, sampling inside
