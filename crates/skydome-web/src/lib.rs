@@ -4,8 +4,8 @@
 //! [`skydome::pipeline::run`]. It takes the photos' bytes and the pipeline's
 //! [`Options`] as JSON, and hands back encoded bytes (Radiance `.hdr`, OpenEXR, JPEG) and the
 //! pipeline's report as JSON. It decides nothing about images: every rule lives in the library,
-//! so the phone and the laptop write the same file from the same frames (a test in
-//! `tests/same_bytes.rs` proves it against the library and the command line).
+//! so the phone and the laptop write the same file from the same frames (`tests/same_bytes.rs`
+//! proves it against the library; the browser tests in `web-tests/` against the command line).
 //!
 //! The static app that loads this module lives in `www/` beside this crate; `build.sh` builds
 //! both into one folder.
@@ -55,14 +55,21 @@ impl std::fmt::Display for WebError {
     }
 }
 
-/// One human sentence for the screen: the message on one line, capitalised, ending in a full
-/// stop.
+/// One human sentence for the screen: the message on one line, ending in a full stop, and
+/// capitalised unless it starts with a file name (which keeps its spelling).
 pub fn sentence(message: &str) -> String {
     let one_line = message.split_whitespace().collect::<Vec<_>>().join(" ");
-    let mut chars = one_line.chars();
-    let mut s = match chars.next() {
-        Some(c) => c.to_uppercase().chain(chars).collect::<String>(),
-        None => return "Something went wrong.".to_string(),
+    let first = one_line.split([' ', ':']).next().unwrap_or("");
+    let plain_word = first.chars().all(|c| c.is_alphabetic() || c == '\'');
+    let mut s = match plain_word {
+        true => {
+            let mut chars = one_line.chars();
+            match chars.next() {
+                Some(c) => c.to_uppercase().chain(chars).collect::<String>(),
+                None => return "Something went wrong.".to_string(),
+            }
+        }
+        false => one_line,
     };
     if !s.ends_with(['.', '!', '?']) {
         s.push('.');
@@ -439,10 +446,11 @@ mod tests {
     fn sentence_is_one_capitalised_line_with_a_full_stop() {
         assert_eq!(
             sentence("frame_0.jpg: cannot decode:\n  bad\tmarker"),
-            "Frame_0.jpg: cannot decode: bad marker."
+            "frame_0.jpg: cannot decode: bad marker."
         );
         assert_eq!(sentence("cancelled"), "Cancelled.");
         assert_eq!(sentence("done!"), "Done!");
+        assert_eq!(sentence("calibration failed: x"), "Calibration failed: x.");
         assert_eq!(sentence(""), "Something went wrong.");
     }
 

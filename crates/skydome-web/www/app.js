@@ -13,7 +13,9 @@ const screens = ['camera', 'work', 'result', 'settings'];
 function sentence(err) {
   const msg = String(err && err.message ? err.message : err).split(/\s+/).join(' ').trim();
   if (!msg) return 'Something went wrong.';
-  const s = msg[0].toUpperCase() + msg.slice(1);
+  // Capitalised unless it starts with a file name, which keeps its spelling.
+  const first = msg.split(/[ :]/)[0];
+  const s = /^[\p{L}']+$/u.test(first) ? msg[0].toUpperCase() + msg.slice(1) : msg;
   return /[.!?]$/.test(s) ? s : s + '.';
 }
 
@@ -222,7 +224,7 @@ async function afterRun(result) {
   img.dataset.height = result.height;
   showFacts(result);
   show('result');
-  if (window.__skydomeTest) window.__skydomeTest.lastResult = result;
+  window.__skydomeCoreMs = result.ms; // read by web-tests/measure.mjs
   document.body.dataset.ready = String(Date.now());
 }
 
@@ -375,6 +377,7 @@ async function onPreviewTap(ev) {
 // The live camera and its overlay: the lens circle, the 180° horizon and the north point.
 
 let lens = null; // {circle, horizon} in the camera picture's pixels
+let lensRetry = null;
 
 function drawOverlay() {
   const video = $('video');
@@ -417,9 +420,13 @@ async function findLens() {
       const fit = await ask('circle', { name: 'camera picture', bytes: frame.bytes }, null, [frame.bytes]);
       lens = await ask('overlay', { circle: fit.circle, model: settings.model, fov: settings.fov });
     }
+    $('lens-status').textContent = lens ? `Lens circle r ${lens.circle.r.toFixed(0)} px, horizon r ${lens.horizon.r.toFixed(0)} px${stored ? ' (stored lens profile)' : ' (detected)'}.` : '';
   } catch (err) {
     lens = null;
-    $('camera-status').textContent = `${sentence(err)} The overlay appears once the lens is seen.`;
+    // Not an error: the lens may simply not be on yet. The core's reason is kept for the curious.
+    $('lens-status').textContent = 'No fish-eye circle in the camera picture yet: the overlay appears once the lens is on.';
+    $('lens-status').title = sentence(err);
+    if (!lensRetry) lensRetry = setTimeout(() => { lensRetry = null; if (document.body.dataset.screen === 'camera') findLens(); }, 5000);
   }
   drawOverlay();
 }
@@ -576,18 +583,19 @@ function wire() {
   const img = $('preview');
   img.addEventListener('dblclick', onPreviewTap);
   img.addEventListener('touchend', onPreviewTap);
-  const needsTap = compass.start((h) => {
+  compass.start((h) => {
     $('heading').textContent = `${h.toFixed(1)}° (top edge)`;
+    $('compass-permission').hidden = true;
     drawOverlay();
-  });
-  if (needsTap) {
+  }, () => {
     const b = $('compass-permission');
     b.hidden = false;
     b.onclick = () => compass.requestPermission().then(() => { b.hidden = true; }).catch(showError);
-  }
+  });
 }
 
 startWorker();
+window.__skydomeAsk = ask; // for web-tests/measure.mjs (the worker's memory)
 wire();
 show('camera');
 startCamera();

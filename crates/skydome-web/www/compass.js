@@ -53,24 +53,21 @@ function onIos(e) {
   }
 }
 
-/** Starts listening; `onChange(heading)` is called on each reading. Returns whether a
- *  permission tap is needed first (iOS). */
-export function start(onChange) {
+/** Starts listening; `onChange(heading)` is called on each reading. `needsTap()` is called
+ *  when no reading came within a second and the browser wants a permission tap (iOS). */
+export function start(onChange, needsTap) {
   listeners.add(onChange);
   window.addEventListener('devicemotion', (e) => {
     const g = e.accelerationIncludingGravity;
     if (g && g.x != null) gravity = { x: g.x, y: g.y, z: g.z };
   });
-  if ('ondeviceorientationabsolute' in window) {
-    window.addEventListener('deviceorientationabsolute', onAbsolute);
-    return false;
-  }
-  if (typeof DeviceOrientationEvent !== 'undefined'
-      && typeof DeviceOrientationEvent.requestPermission === 'function') {
-    return true;
-  }
+  window.addEventListener('deviceorientationabsolute', onAbsolute);
+  // Relative orientation has no north: only absolute events or iOS's compass heading count.
   window.addEventListener('deviceorientation', (e) => (e.absolute ? onAbsolute(e) : onIos(e)));
-  return false;
+  setTimeout(() => {
+    if (heading == null && typeof DeviceOrientationEvent !== 'undefined'
+        && typeof DeviceOrientationEvent.requestPermission === 'function') needsTap();
+  }, 1000);
 }
 
 /** iOS: ask for the compass from a tap. */

@@ -12,10 +12,11 @@ let job = null;      // the photos of the current bracket (kept for a second run
 let outcome = null;  // the last run's products, encoded on demand
 
 function sentence(err) {
-  // JsError from the core is already one sentence; anything else is made into one.
   const msg = String(err && err.message ? err.message : err).split(/\s+/).join(' ').trim();
   if (!msg) return 'Something went wrong.';
-  const s = msg[0].toUpperCase() + msg.slice(1);
+  // Capitalised unless it starts with a file name, which keeps its spelling.
+  const first = msg.split(/[ :]/)[0];
+  const s = /^[\p{L}']+$/u.test(first) ? msg[0].toUpperCase() + msg.slice(1) : msg;
   return /[.!?]$/.test(s) ? s : s + '.';
 }
 
