@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use serde::Serialize;
-use skydome::bracket::Bracket;
 use skydome::image::Circle;
 use skydome::response::{self, CalibrateOptions, CameraProfile, Solver};
 use skydome::sampling::SampleOptions;
@@ -31,8 +30,8 @@ pub struct CalibArgs {
     #[arg(long, value_enum, default_value_t = Method::Robust)]
     pub method: Method,
     /// Least-squares solver: `schur` (fast, default) or `svd` (the seed's dense SVD, slow).
-    #[arg(long, value_enum, default_value_t = SolverArg::Schur)]
-    pub solver: SolverArg,
+    #[arg(long, default_value = "schur", value_parser = parse_solver)]
+    pub solver: Solver,
     /// Sample only inside this circle (centre x, centre y, radius; pixels, origin top-left).
     #[arg(long, value_parser = parse_circle, value_name = "CX,CY,R")]
     pub circle: Option<Circle>,
@@ -47,13 +46,8 @@ pub enum Method {
     Seed,
 }
 
-/// Solver choice.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum SolverArg {
-    /// Schur complement + Cholesky.
-    Schur,
-    /// Dense SVD of the full system.
-    Svd,
+fn parse_solver(s: &str) -> Result<Solver, String> {
+    s.parse().map_err(|e: skydome::UnknownName| e.to_string())
 }
 
 /// Parses `cx,cy,r` in pixels.
@@ -84,10 +78,7 @@ impl CalibArgs {
         CalibrateOptions {
             sampling,
             lambda: self.lambda,
-            solver: match self.solver {
-                SolverArg::Schur => Solver::Schur,
-                SolverArg::Svd => Solver::DenseSvd,
-            },
+            solver: self.solver,
         }
     }
 }
@@ -142,14 +133,6 @@ struct SweepRow {
     used: f64,
     rms_spread: f64,
     max_spread: f64,
-}
-
-/// Fills the camera fields of a profile from the bracket's EXIF.
-pub fn describe_camera(profile: &mut CameraProfile, br: &Bracket) {
-    profile.make = br.info.make.clone();
-    profile.model = br.info.model.clone();
-    profile.iso = br.frames.first().and_then(|f| f.exposure.iso);
-    profile.date = br.info.datetime_original.clone();
 }
 
 /// The top-level entry point for `skydome calibrate`.
@@ -209,7 +192,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         calibration.to_profile()
     };
     spin.finish_and_clear();
-    describe_camera(&mut profile, &br);
+    skydome::pipeline::describe_camera(&mut profile, &br);
     outputs.add(&a.output, profile.to_json().into_bytes());
     let written = outputs.commit(&a.images, a.force)?;
     report.written = written.iter().map(|p| p.display().to_string()).collect();

@@ -4,8 +4,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use rayon::prelude::*;
 use skydome::bracket::{self, Bracket, DecodeOptions, OrientationPolicy};
+use skydome::pipeline::{self, EncodedFrame, Frames, Input, PipelineError};
 
 /// Where exposure times come from, as given on the command line.
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -16,68 +16,118 @@ pub struct BracketArgs {
     /// A list file with one 'FILE TIME' pair per line; overrides EXIF.
     #[arg(long, value_name = "LIST")]
     pub times_file: Option<PathBuf>,
-    /// EXIF orientation: apply it (all frames must agree) or ignore it (stored pixel order).
-    #[arg(long, value_enum, default_value_t = Orientation::Apply)]
-    pub orientation: Orientation,
+    /// EXIF orientation: `apply` it (all frames must agree) or `ignore` it (stored pixel order).
+    #[arg(long, default_value = "apply", value_parser = parse_orientation)]
+    pub orientation: OrientationPolicy,
     /// Refuse images with more pixels than this (decompression-bomb guard).
     #[arg(long, default_value_t = DecodeOptions::default().max_pixels, value_name = "PIXELS")]
     pub max_pixels: u64,
 }
 
-/// EXIF orientation policy on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
-pub enum Orientation {
-    /// Rotate/flip pixels as EXIF says.
-    #[default]
-    Apply,
-    /// Keep the stored pixel order.
-    Ignore,
+impl BracketArgs {
+    /// The library's bracket input for `files`: their bytes, the exposure overrides, the
+    /// orientation policy and the pixel limit.
+    pub fn input(&self, files: &[PathBuf]) -> Result<Input> {
+        let times = match (&self.times, &self.times_file) {
+            (Some(_), Some(_)) => bail!("give either --times or --times-file, not both"),
+            (Some(t), None) => {
+                let t = bracket::parse_times(t).map_err(|e| hint(e.into()))?;
+                if t.len() != files.len() {
+                    bail!(
+                        "--times has {} values but {} files were given; give one time per file, in file order",
+                        t.len(),
+                        files.len()
+                    );
+                }
+                Some(t)
+            }
+            (None, Some(list)) => Some(times_from_list(list, files)?),
+            (None, None) => None,
+        };
+        let frames = files
+            .iter()
+            .map(|p| {
+                Ok(EncodedFrame {
+                    name: p.display().to_string(),
+                    bytes: read(p)?,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Input {
+            frames: Frames::Encoded(frames),
+            times,
+            orientation: self.orientation,
+            decode: DecodeOptions {
+                max_pixels: self.max_pixels,
+            },
+        })
+    }
+}
+
+/// Parses `apply` or `ignore` for `--orientation`.
+fn parse_orientation(s: &str) -> Result<OrientationPolicy, String> {
+    s.parse().map_err(|e: skydome::UnknownName| e.to_string())
 }
 
 /// Reads, decodes and validates the bracket named on the command line.
 pub fn load_bracket(files: &[PathBuf], args: &BracketArgs, quiet: bool) -> Result<Bracket> {
-    if files.len() < 2 {
-        bail!(bracket::BracketError::TooFewFrames(files.len()));
-    }
-    let times = match (&args.times, &args.times_file) {
-        (Some(_), Some(_)) => bail!("give either --times or --times-file, not both"),
-        (Some(t), None) => {
-            let t = bracket::parse_times(t)?;
-            if t.len() != files.len() {
-                bail!(bracket::BracketError::TimesCount {
-                    given: t.len(),
-                    frames: files.len()
-                });
-            }
-            Some(t)
-        }
-        (None, Some(list)) => Some(times_from_list(list, files)?),
-        (None, None) => None,
-    };
-    let opts = DecodeOptions {
-        max_pixels: args.max_pixels,
-    };
-    let bar = progress(quiet, files.len() as u64, "decoding");
-    let decoded = files
-        .par_iter()
-        .map(|p| {
-            let name = p.display().to_string();
-            let bytes = std::fs::read(p).with_context(|| format!("{name}: cannot read"))?;
-            let d = bracket::decode(&name, &bytes, &opts)?;
-            bar.inc(1);
-            Ok(d)
-        })
-        .collect::<Result<Vec<_>>>()?;
-    bar.finish_and_clear();
-    let policy = match args.orientation {
-        Orientation::Apply => OrientationPolicy::Apply,
-        Orientation::Ignore => OrientationPolicy::Ignore,
-    };
-    let br = bracket::assemble(decoded, times.as_deref(), policy)?;
+    let input = args.input(files)?;
+    let mut bar = StageBar::new(quiet);
+    let br = pipeline::load_bracket(input, &mut |p| bar.show(p)).map_err(hint)?;
+    bar.finish();
     for w in &br.warnings {
         warn(quiet, w);
     }
     Ok(br)
+}
+
+/// The library's error with this command line's flags added where the library says what to
+/// do in neutral words.
+pub fn hint(e: PipelineError) -> anyhow::Error {
+    use bracket::BracketError as B;
+    let extra = match &e {
+        PipelineError::Bracket(B::MissingExposure { .. }) => {
+            " with --times 1/400,1/100,... (in file order) or --times-file LIST (lines 'FILE TIME')"
+        }
+        PipelineError::Bracket(B::TooLarge { .. }) => "; raise it with --max-pixels",
+        PipelineError::Bracket(B::OrientationMismatch { .. }) => " (use --orientation ignore)",
+        PipelineError::CircleNotFound { .. } => " with --circle CX,CY,R",
+        PipelineError::NoEphemeris => " (--time, --lat, --lon)",
+        PipelineError::NeedsLens(_) => " (--lens lens.json or --fisheye)",
+        _ => "",
+    };
+    anyhow!("{e}{extra}")
+}
+
+/// One progress bar on stderr driven by the pipeline's stage events (hidden when quiet or
+/// when stderr is not a terminal).
+pub struct StageBar {
+    bar: ProgressBar,
+    stage: Option<pipeline::Stage>,
+}
+
+impl StageBar {
+    /// A bar, hidden when `quiet`.
+    pub fn new(quiet: bool) -> Self {
+        let bar = progress(quiet, 100, "");
+        Self { bar, stage: None }
+    }
+
+    /// Shows an event; never cancels (Ctrl-C ends the process).
+    pub fn show(&mut self, p: &pipeline::Progress) -> std::ops::ControlFlow<()> {
+        if self.stage != Some(p.stage) {
+            self.stage = Some(p.stage);
+            self.bar.set_message(p.stage.name());
+        }
+        self.bar
+            .set_position((p.fraction.clamp(0.0, 1.0) * 100.0) as u64);
+        std::ops::ControlFlow::Continue(())
+    }
+
+    /// Removes the bar.
+    pub fn finish(self) {
+        self.bar.finish_and_clear();
+    }
 }
 
 fn times_from_list(list: &Path, files: &[PathBuf]) -> Result<Vec<f64>> {

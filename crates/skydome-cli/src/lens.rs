@@ -87,7 +87,7 @@ pub struct FitArgs {
 /// The top-level entry point for `skydome lens`.
 pub fn run(a: Args, quiet: bool) -> Result<()> {
     match a.command {
-        LensCommand::Detect(d) => detect(d, quiet),
+        LensCommand::Detect(d) => detect(d),
         LensCommand::Fit(f) => fit(f, quiet),
     }
 }
@@ -103,46 +103,15 @@ struct DetectReport {
     written: Vec<String>,
 }
 
-fn detect(a: DetectArgs, quiet: bool) -> Result<()> {
+fn detect(a: DetectArgs) -> Result<()> {
     for o in [a.overlay.as_ref(), a.output.as_ref()]
         .into_iter()
         .flatten()
     {
         io::check_destination(o, &a.images, a.force)?;
     }
-    // One photo needs no exposure time: give it a nominal one so the bracket loader can be reused.
-    let br = if a.images.len() == 1 {
-        let p = &a.images[0];
-        let name = p.display().to_string();
-        let d = skydome::bracket::decode(
-            &name,
-            &io::read(p)?,
-            &skydome::bracket::DecodeOptions {
-                max_pixels: a.bracket.max_pixels,
-            },
-        )?;
-        let (w, h) = (d.width, d.height);
-        skydome::bracket::Bracket {
-            frames: vec![skydome::bracket::Frame {
-                name,
-                width: w,
-                height: h,
-                pixels: d.pixels,
-                exposure: skydome::bracket::Exposure {
-                    time_s: 1.0,
-                    iso: None,
-                    f_number: None,
-                },
-            }],
-            info: d.info,
-            warnings: Vec::new(),
-        }
-    } else {
-        io::load_bracket(&a.images, &a.bracket, quiet)?
-    };
-    let photo = crate::geometry::best_exposed(&br);
-    let fit = fisheye::detect_circle(&photo)
-        .with_context(|| format!("{}: circle detection", br.frames[0].name))?;
+    let input = a.bracket.input(&a.images)?;
+    let (fit, photo) = skydome::pipeline::detect_lens_circle(input).map_err(io::hint)?;
     let profile = LensProfile::from_fov(fit.circle, a.fov, a.model).context("lens model")?;
     let horizon = profile
         .radius_at_deg(90.0)
@@ -198,31 +167,7 @@ fn detect(a: DetectArgs, quiet: bool) -> Result<()> {
 fn read_pairs(p: &PathBuf) -> Result<Vec<AngleRadius>> {
     let name = p.display().to_string();
     let text = std::fs::read_to_string(p).with_context(|| format!("{name}: cannot read"))?;
-    let mut v = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.split('#').next().unwrap_or("").trim();
-        if line.is_empty() {
-            continue;
-        }
-        let f: Vec<&str> = line
-            .split([',', ';', '\t', ' '])
-            .filter(|s| !s.is_empty())
-            .collect();
-        let nums: Option<Vec<f64>> = f.iter().map(|s| s.parse::<f64>().ok()).collect();
-        match nums.as_deref() {
-            Some([a, r]) => v.push(AngleRadius {
-                angle_deg: *a,
-                radius_px: *r,
-            }),
-            // A header line such as "angle_deg,radius_px" is skipped.
-            None if v.is_empty() && i == 0 => continue,
-            _ => bail!(
-                "{name} line {}: expected 'angle_deg,radius_px', got '{line}'",
-                i + 1
-            ),
-        }
-    }
-    Ok(v)
+    fisheye::parse_angle_radius_csv(&text).with_context(|| name)
 }
 
 fn parse_centre(s: &str) -> Result<(f64, f64)> {

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use skydome::formats::picture::{self, PictureFormat};
-use skydome::image::{Circle, RgbImage};
+use skydome::image::RgbImage;
 use skydome::plot;
 use skydome::response::Calibration;
 use skydome::tonemap::{self, ToneMap};
@@ -58,19 +58,4 @@ pub fn encode_rgb8(path: &Path, img: &RgbImage<u8>) -> Result<Vec<u8>> {
         bail!("{name}: cannot write '.{ext}' images; use .jpg or .png");
     };
     picture::encode_rgb8(img, format).with_context(|| name.to_string())
-}
-
-/// A grey 8-bit PNG of a per-pixel value in 0..=1 (e.g. merge confidence).
-pub fn grey_png(path: &Path, width: usize, height: usize, values: &[f32]) -> Result<Vec<u8>> {
-    let img =
-        picture::grey_picture(width, height, values).with_context(|| path.display().to_string())?;
-    encode_rgb8(path, &img)
-}
-
-/// A tone map with the defaults, masked to `circle` when given.
-pub fn default_tonemap(circle: Option<Circle>) -> ToneMap {
-    ToneMap {
-        mask: circle,
-        ..ToneMap::default()
-    }
 }

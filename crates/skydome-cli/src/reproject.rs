@@ -3,12 +3,11 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use skydome::fisheye::{LensKind, LensProfile};
-use skydome::formats::HdrMeta;
+use skydome::fisheye::{self, LensKind, LensProfile};
+use skydome::pipeline;
 use skydome::reproject::{self, Ground, MapProjection, ReprojectOptions};
 use skydome::sky::{DevicePose, ImageOrientation, SkyGeometry};
 
-use crate::geometry::PoseArg;
 use crate::io::{self, Outputs};
 
 /// Arguments of `skydome reproject`.
@@ -32,8 +31,8 @@ pub struct Args {
     #[arg(long, allow_hyphen_values = true, default_value_t = 0.0)]
     pub north: f64,
     /// How the phone lay.
-    #[arg(long, value_enum, default_value_t = PoseArg::ScreenDown)]
-    pub device_pose: PoseArg,
+    #[arg(long, default_value = "screen-down", value_parser = crate::geometry::parse_pose)]
+    pub device_pose: DevicePose,
     /// Output width (equirect) or side (other maps) in pixels.
     #[arg(long, default_value_t = 1024)]
     pub size: usize,
@@ -80,12 +79,8 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         }
         _ => bail!("give either --lens lens.json (an uncropped photo) or --dome MODEL (a 180° dome from merge --crop)"),
     };
-    let pose = match a.device_pose {
-        PoseArg::ScreenDown => DevicePose::ScreenDown,
-        PoseArg::ScreenUp => DevicePose::ScreenUp,
-    };
-    let geom =
-        SkyGeometry::new(&lens, a.north, pose, ImageOrientation::Normal).context("sky geometry")?;
+    let geom = SkyGeometry::new(&lens, a.north, a.device_pose, ImageOrientation::Normal)
+        .context("sky geometry")?;
     let target = match a.to {
         Target::Equirect => MapProjection::Equirect {
             width: a.size,
@@ -118,12 +113,10 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     .with_context(|| a.input.display().to_string())?;
     spin.finish_and_clear();
     let e_in = reproject::horizontal_irradiance_fisheye(&r.image, &geom);
-    let meta = HdrMeta {
-        capdate: r.meta.capdate.clone(),
-        gmt: r.meta.gmt.clone(),
-        view: (a.to == Target::Fisheye).then(|| "-vta -vh 180 -vv 180".to_string()),
-        ..HdrMeta::default()
-    };
+    let mut meta = pipeline::equirect_meta(&r.meta);
+    if let MapProjection::Fisheye { model, fov_deg, .. } = target {
+        meta.view = fisheye::radiance_view(model, fov_deg);
+    }
     let mut out = Outputs::default();
     out.add(
         &a.output,

@@ -226,6 +226,8 @@ pub enum OrientationPolicy {
     Ignore,
 }
 
+crate::named_enum!(OrientationPolicy, "orientation policy", [Apply => "apply", Ignore => "ignore"]);
+
 /// Options for decoding frames.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DecodeOptions {
@@ -274,6 +276,10 @@ pub struct Bracket {
     pub info: CaptureInfo,
     /// Things the user should know that do not stop the merge (one line each).
     pub warnings: Vec<String>,
+    /// The EXIF orientation (1..=8) still in force on the pixels: 1 when it was applied by
+    /// [`assemble`], the frames' stored value when it was ignored. Sky geometry needs it to
+    /// know which way the sensor's top edge lies in the image.
+    pub pixel_orientation: u16,
 }
 
 impl Bracket {
@@ -311,7 +317,7 @@ pub enum BracketError {
         reason: String,
     },
     /// The image is larger than the configured limit.
-    #[error("{file}: image is {width}x{height} = {pixels} pixels, above the limit of {limit} (raise it with --max-pixels)")]
+    #[error("{file}: image is {width}x{height} = {pixels} pixels, above the limit of {limit} (raise the pixel limit if the file is trusted)")]
     TooLarge {
         /// File name.
         file: String,
@@ -368,7 +374,7 @@ pub enum BracketError {
         bits0: u32,
     },
     /// No exposure time for a file.
-    #[error("{file}: no exposure time in EXIF; give times with --times 1/400,1/100,... (in file order) or --times-file LIST (lines 'FILE TIME')")]
+    #[error("{file}: no exposure time in EXIF; supply the exposure times")]
     MissingExposure {
         /// File name.
         file: String,
@@ -382,7 +388,9 @@ pub enum BracketError {
         value: String,
     },
     /// Wrong number of `--times`.
-    #[error("--times has {given} values but {frames} files were given; give one time per file, in file order")]
+    #[error(
+        "{given} exposure times were given for {frames} frames; give one per frame, in frame order"
+    )]
     TimesCount {
         /// Values given.
         given: usize,
@@ -412,7 +420,7 @@ pub enum BracketError {
         stops: f64,
     },
     /// EXIF orientations disagree.
-    #[error("{file}: EXIF orientation {o} differs from {first} ({o0}); use --orientation ignore to keep the stored pixel order")]
+    #[error("{file}: EXIF orientation {o} differs from {first} ({o0}); ignore EXIF orientation (keep the stored pixel order) to merge them")]
     OrientationMismatch {
         /// File name.
         file: String,
@@ -450,7 +458,9 @@ pub fn parse_time(file: &str, text: &str) -> Result<f64, BracketError> {
 
 /// Parses a comma-separated `--times` list (e.g. `1/400,1/100,1/25`).
 pub fn parse_times(text: &str) -> Result<Vec<f64>, BracketError> {
-    text.split(',').map(|t| parse_time("--times", t)).collect()
+    text.split(',')
+        .map(|t| parse_time("exposure times", t))
+        .collect()
 }
 
 /// Parses a list file: one `FILE TIME` pair per line (whitespace separated; `#` starts a
@@ -506,6 +516,12 @@ pub fn decode(
                 file: name.to_string(),
             })
         }
+    }
+    if reader.format() == Some(ImageFormat::Jpeg) {
+        check_jpeg_complete(bytes).map_err(|reason| BracketError::Corrupt {
+            file: name.to_string(),
+            reason: reason.to_string(),
+        })?;
     }
     let mut decoder = reader.into_decoder().map_err(|e| corrupt(&e))?;
     let (w, h) = decoder.dimensions();
@@ -565,6 +581,67 @@ pub fn decode(
 }
 
 /// Fills exposure and capture metadata from the file's EXIF, when it has any.
+/// Checks that a JPEG stream is whole: every marker segment fits in the file and the scans end
+/// with the end-of-image marker.
+///
+/// Written by hand because the decoders do not say so: `image`'s JPEG decoder (zune-jpeg) fills
+/// the rows missing from a truncated file with grey and returns `Ok`, which would merge the
+/// missing part of a frame as if it were picture. Bytes after the end-of-image marker (some
+/// phones append data there) are allowed.
+pub fn check_jpeg_complete(bytes: &[u8]) -> Result<(), &'static str> {
+    const TRUNCATED: &str = "truncated JPEG (the file ends before its end-of-image marker)";
+    if !bytes.starts_with(&[0xFF, 0xD8]) {
+        return Err("not a JPEG stream (no start-of-image marker)");
+    }
+    let mut i = 2;
+    loop {
+        // Markers may be preceded by any number of 0xFF fill bytes.
+        if bytes.get(i) != Some(&0xFF) {
+            return Err(match i < bytes.len() {
+                true => "corrupt JPEG (a marker was expected)",
+                false => TRUNCATED,
+            });
+        }
+        while bytes.get(i) == Some(&0xFF) {
+            i += 1;
+        }
+        let Some(&marker) = bytes.get(i) else {
+            return Err(TRUNCATED);
+        };
+        i += 1;
+        match marker {
+            0xD9 => return Ok(()),
+            // Stand-alone markers: restart markers, TEM, a stray SOI.
+            0xD0..=0xD8 | 0x01 => continue,
+            _ => {}
+        }
+        let len = match bytes.get(i..i + 2) {
+            Some(l) => usize::from(u16::from_be_bytes([l[0], l[1]])),
+            None => return Err(TRUNCATED),
+        };
+        if len < 2 {
+            return Err("corrupt JPEG (a marker segment has a length below 2)");
+        }
+        i += len;
+        if i > bytes.len() {
+            return Err(TRUNCATED);
+        }
+        if marker == 0xDA {
+            // Entropy-coded data runs to the next marker that is not a stuffed 0xFF00 or a
+            // restart marker.
+            loop {
+                match bytes.get(i..i + 2) {
+                    None => return Err(TRUNCATED),
+                    Some([0xFF, m]) if *m != 0x00 && !(0xD0..=0xD7).contains(m) && *m != 0xFF => {
+                        break
+                    }
+                    _ => i += 1,
+                }
+            }
+        }
+    }
+}
+
 fn read_exif(bytes: &[u8], frame: &mut DecodedFrame) {
     use exif::{In, Tag, Value};
     let Ok(ex) = exif::Reader::new().read_from_container(&mut Cursor::new(bytes)) else {
@@ -699,7 +776,7 @@ pub fn assemble(
         for &v in t {
             if !(v.is_finite() && v > 0.0) {
                 return Err(BracketError::BadTime {
-                    file: "--times".into(),
+                    file: "exposure times".into(),
                     value: v.to_string(),
                 });
             }
@@ -814,11 +891,60 @@ pub fn assemble(
             });
         }
     }
+    let pixel_orientation = match orientation {
+        OrientationPolicy::Apply => 1,
+        OrientationPolicy::Ignore => info.orientation,
+    };
     Ok(Bracket {
         frames,
         info,
         warnings,
+        pixel_orientation,
     })
+}
+
+/// A 16-bit code → one of 256 levels, `round(v / 257)` (so `257 · z` maps to `z` exactly).
+#[inline]
+pub fn bin16(v: u16) -> u8 {
+    ((u32::from(v) + 128) / 257) as u8
+}
+
+/// The frame with the most well-exposed samples (codes 20..=235, every 7th sample counted) as
+/// an 8-bit image; 16-bit frames are binned with [`bin16`]. Empty for no frames. The lens
+/// circle is detected on it.
+pub fn best_exposed_u8(frames: &[Frame]) -> crate::image::RgbImage<u8> {
+    let to8 = |p: &Pixels| -> Vec<u8> {
+        match p {
+            Pixels::U8(v) => v.clone(),
+            Pixels::U16(v) => v.iter().map(|&x| bin16(x)).collect(),
+        }
+    };
+    let well = |p: &Pixels| -> usize {
+        match p {
+            Pixels::U8(v) => v
+                .iter()
+                .step_by(7)
+                .filter(|&&z| (20..=235).contains(&z))
+                .count(),
+            Pixels::U16(v) => v
+                .iter()
+                .step_by(7)
+                .filter(|&&z| (20..=235).contains(&bin16(z)))
+                .count(),
+        }
+    };
+    match frames.iter().max_by_key(|f| well(&f.pixels)) {
+        Some(f) => crate::image::RgbImage {
+            width: f.width,
+            height: f.height,
+            data: to8(&f.pixels),
+        },
+        None => crate::image::RgbImage {
+            width: 0,
+            height: 0,
+            data: Vec::new(),
+        },
+    }
 }
 
 fn describe(e: &Exposure) -> String {

@@ -109,3 +109,14 @@ pub fn draw_disc(img: &mut RgbImage<u8>, cx: f64, cy: f64, r: f64, colour: [u8; 
         }
     }
 }
+
+/// A tone-mapped picture of `image` (with `tm`) with `marks` drawn on it.
+pub fn overlay_picture(
+    image: &crate::image::HdrImage,
+    marks: &OverlayMarks,
+    tm: &crate::tonemap::ToneMap,
+) -> Result<RgbImage<u8>, crate::tonemap::TonemapError> {
+    let mut rgb = crate::tonemap::tonemap_u8(image, tm)?;
+    draw_overlay(&mut rgb, marks);
+    Ok(rgb)
+}

@@ -122,6 +122,8 @@ pub enum Weighting {
     Hat,
 }
 
+crate::named_enum!(Weighting, "weighting", [None => "none", Hat => "hat"]);
+
 /// Debevec's hat weight of an 8-bit code: `z` up to 127, `255 − z` above; zero at 0 and 255.
 #[inline]
 pub fn hat(z: u8) -> f64 {
@@ -236,6 +238,8 @@ pub enum Solver {
     /// The seed's dense SVD of the full system (slow; a reference).
     DenseSvd,
 }
+
+crate::named_enum!(Solver, "solver", [Schur => "schur", DenseSvd => "svd"]);
 
 /// Calibration options.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -313,11 +313,7 @@ pub(crate) fn code_f(p: &Pixels, idx: usize) -> [f32; 3] {
     }
 }
 
-/// 16-bit value → one of 256 levels, `round(v / 257)`.
-#[inline]
-pub fn bin16(v: u16) -> u8 {
-    ((v as u32 + 128) / 257) as u8
-}
+pub use crate::bracket::bin16;
 
 /// Chooses calibration samples from `frames` (sorted shortest exposure first), inside `circle`
 /// when given. See the module docs for both methods.

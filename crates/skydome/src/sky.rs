@@ -157,6 +157,8 @@ pub enum DevicePose {
     ScreenUp,
 }
 
+crate::named_enum!(DevicePose, "device pose", [ScreenDown => "screen-down", ScreenUp => "screen-up"]);
+
 /// EXIF orientation: how the stored pixels must be transformed to display the image upright
 /// (in the phone's natural orientation). Values are the EXIF tag (274) numbers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]

@@ -125,6 +125,8 @@ pub enum ExrPixelType {
     Float,
 }
 
+crate::named_enum!(ExrPixelType, "EXR pixel type", [Half => "half", Float => "float"]);
+
 /// Lossless compression of the written blocks. Measured on a 6 MP synthetic merged sky-dome,
 /// half float, 2 cores (the EXR part of `skydome merge --exr`): ZIP 8.0 MB in 0.54 s, PIZ
 /// 7.4 MB in 0.31 s, RLE 16 MB in 0.22 s, none 36 MB in 0.27 s.
@@ -142,6 +144,8 @@ pub enum ExrCompression {
     /// Wavelet plus Huffman, 32 scan lines per block.
     Piz,
 }
+
+crate::named_enum!(ExrCompression, "EXR compression", [None => "none", Rle => "rle", Zips => "zips", Zip => "zip", Piz => "piz"]);
 
 impl ExrCompression {
     fn to_exr(self) -> Compression {

@@ -6,7 +6,10 @@
 //! - [`exr`]: OpenEXR RGB half/float with the same metadata as string attributes.
 //! - [`picture`]: 8-bit JPEG/PNG and 16-bit PNG display pictures (previews, overlays, maps).
 
+use crate::image::HdrImage;
+
 pub mod exr;
+pub mod lens_profile;
 pub mod picture;
 pub mod rgbe;
 
@@ -50,4 +53,133 @@ pub struct HdrMeta {
     pub software: Option<String>,
     /// Any other header lines, verbatim (without the trailing newline).
     pub other: Vec<String>,
+}
+
+/// A radiance-map file format skydome writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RadianceFormat {
+    /// Radiance RGBE `.hdr`, new-style RLE.
+    Hdr,
+    /// OpenEXR, with the given channel type and compression.
+    Exr(exr::ExrOptions),
+}
+
+impl RadianceFormat {
+    /// The format for a file extension: `hdr`, `pic`, `rgbe` → RGBE; `exr` → OpenEXR with
+    /// `exr_options`; `None` for anything else.
+    pub fn from_extension(ext: &str, exr_options: exr::ExrOptions) -> Option<Self> {
+        match ext.to_ascii_lowercase().as_str() {
+            "hdr" | "pic" | "rgbe" => Some(Self::Hdr),
+            "exr" => Some(Self::Exr(exr_options)),
+            _ => None,
+        }
+    }
+}
+
+/// Errors reading or writing a radiance map in either format.
+#[derive(Debug, thiserror::Error)]
+pub enum RadianceError {
+    /// Radiance RGBE.
+    #[error(transparent)]
+    Rgbe(#[from] rgbe::RgbeError),
+    /// OpenEXR.
+    #[error(transparent)]
+    Exr(#[from] exr::ExrError),
+    /// Neither format's signature.
+    #[error("not a Radiance .hdr or OpenEXR file (unrecognised first bytes)")]
+    Unrecognised,
+}
+
+/// An encoded radiance map and what the encoder had to decide.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EncodedRadiance {
+    /// The file's bytes.
+    pub bytes: Vec<u8>,
+    /// Things the caller should tell the user (e.g. a switch from half to float).
+    pub warnings: Vec<String>,
+}
+
+/// Largest finite half-float value.
+pub const HALF_MAX: f32 = 65504.0;
+
+/// Encodes `image` with `meta` as `format`. OpenEXR half channels turn values above
+/// [`HALF_MAX`] into infinity, so when the image holds such values the channels are written as
+/// 32-bit float instead, with a warning.
+pub fn encode_radiance(
+    image: &HdrImage,
+    meta: &HdrMeta,
+    format: RadianceFormat,
+) -> Result<EncodedRadiance, RadianceError> {
+    match format {
+        RadianceFormat::Hdr => Ok(EncodedRadiance {
+            bytes: rgbe::encode_rgbe(image, meta)?,
+            warnings: Vec::new(),
+        }),
+        RadianceFormat::Exr(mut o) => {
+            let mut warnings = Vec::new();
+            if o.pixel_type == exr::ExrPixelType::Half {
+                let max = image
+                    .data
+                    .iter()
+                    .copied()
+                    .filter(|v| v.is_finite())
+                    .fold(0.0f32, f32::max);
+                if max > HALF_MAX {
+                    o.pixel_type = exr::ExrPixelType::Float;
+                    warnings.push(format!(
+                        "values up to {max:.3e} exceed half-float range; writing 32-bit float channels"
+                    ));
+                }
+            }
+            Ok(EncodedRadiance {
+                bytes: exr::encode_exr(image, meta, o)?,
+                warnings,
+            })
+        }
+    }
+}
+
+/// A radiance map read by [`read_radiance`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct RadianceFile {
+    /// Radiance: the stored values divided by the file's `EXPOSURE` (Radiance's rule).
+    pub image: HdrImage,
+    /// Metadata from the header.
+    pub meta: HdrMeta,
+    /// Header lines (`.hdr`) or `name = value` attributes (`.exr`).
+    pub header: Vec<String>,
+    /// "Radiance RGBE" or "OpenEXR".
+    pub format: &'static str,
+}
+
+/// Reads a Radiance `.hdr` or OpenEXR file, recognised by its first bytes (not its name), with
+/// the formats' default limits. Values are divided by `EXPOSURE` when the header has one.
+pub fn read_radiance(bytes: &[u8]) -> Result<RadianceFile, RadianceError> {
+    let (mut image, meta, header, format) = if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+        let f = exr::read_exr(bytes, &exr::Limits::default())?;
+        let header = f
+            .text_attributes
+            .iter()
+            .map(|(k, v)| format!("{k} = {v}"))
+            .collect();
+        (f.image, f.meta, header, "OpenEXR")
+    } else if bytes.starts_with(b"#?") {
+        let f = rgbe::decode_rgbe(bytes, &rgbe::Limits::default())?;
+        (f.image, f.header.meta, f.header.lines, "Radiance RGBE")
+    } else {
+        return Err(RadianceError::Unrecognised);
+    };
+    if let Some(e) = meta
+        .exposure
+        .filter(|e| e.is_finite() && *e > 0.0 && *e != 1.0)
+    {
+        let k = (1.0 / e) as f32;
+        image.data.iter_mut().for_each(|v| *v *= k);
+    }
+    Ok(RadianceFile {
+        image,
+        meta,
+        header,
+        format,
+    })
 }

@@ -1,0 +1,349 @@
+//! Detecting the lens's visible image circle (see the [module docs](super) for the method).
+
+use serde::{Deserialize, Serialize};
+
+use super::FisheyeError;
+use crate::image::{Circle, RgbImage};
+
+/// A fitted image circle.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CircleFit {
+    /// The visible circle (centre and radius in pixels).
+    pub circle: Circle,
+    /// RMS orthogonal distance of the inlier boundary points from the circle, pixels.
+    pub residual_px: f64,
+    /// Number of boundary points that support the fit (inliers).
+    pub points: usize,
+    /// Number of boundary points found before outlier rejection.
+    pub candidates: usize,
+}
+
+/// Detects the lens's visible image circle in an 8-bit RGB image (use the best-exposed frame).
+/// Uses the per-pixel maximum of R, G and B, so a saturated-blue sky and a red sunset horizon
+/// both stand out from the housing. See the module docs for the method.
+pub fn detect_circle(img: &RgbImage<u8>) -> Result<CircleFit, FisheyeError> {
+    let expected = 3 * img.width * img.height;
+    if img.data.len() != expected {
+        return Err(FisheyeError::BufferSize {
+            width: img.width,
+            height: img.height,
+            expected,
+            got: img.data.len(),
+        });
+    }
+    let luma: Vec<u8> = img
+        .data
+        .chunks_exact(3)
+        .map(|c| c[0].max(c[1]).max(c[2]))
+        .collect();
+    detect_circle_luma(&luma, img.width, img.height)
+}
+
+/// [`detect_circle`] on a single-channel 8-bit image (`width * height` samples, row-major,
+/// origin top-left).
+pub fn detect_circle_luma(
+    luma: &[u8],
+    width: usize,
+    height: usize,
+) -> Result<CircleFit, FisheyeError> {
+    if width < 16 || height < 16 {
+        return Err(FisheyeError::ImageTooSmall { width, height });
+    }
+    if luma.len() != width * height {
+        return Err(FisheyeError::BufferSize {
+            width,
+            height,
+            expected: width * height,
+            got: luma.len(),
+        });
+    }
+    let img = blur3(luma, width, height);
+    let (housing, threshold) = housing_threshold(&img, width, height);
+
+    // Rough centre: centroid of the pixels above threshold.
+    let (mut sx, mut sy, mut cnt) = (0.0, 0.0, 0.0);
+    for y in 0..height {
+        for x in 0..width {
+            if img[y * width + x] > threshold {
+                sx += x as f64 + 0.5;
+                sy += y as f64 + 0.5;
+                cnt += 1.0;
+            }
+        }
+    }
+    if cnt < 16.0 {
+        return Err(FisheyeError::NoCircle { points: 0 });
+    }
+    let mut centre = (sx / cnt, sy / cnt);
+    let mut best: Option<CircleFit> = None;
+    // Two passes: the centroid is biased when the circle is cut by the frame; rays cast from the
+    // first fit's centre meet the boundary more squarely.
+    for _ in 0..2 {
+        let pts = boundary_points(&img, width, height, centre, housing, threshold);
+        let fit = robust_circle_fit(&pts)?;
+        centre = (fit.circle.cx, fit.circle.cy);
+        best = Some(fit);
+    }
+    best.ok_or(FisheyeError::NoCircle { points: 0 })
+}
+
+/// 3×3 box blur in f32 (edge pixels replicate), to tame sensor noise before thresholding.
+fn blur3(src: &[u8], w: usize, h: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; w * h];
+    for y in 0..h {
+        let ys = [y.saturating_sub(1), y, (y + 1).min(h - 1)];
+        for x in 0..w {
+            let xs = [x.saturating_sub(1), x, (x + 1).min(w - 1)];
+            let mut s = 0u32;
+            for &yy in &ys {
+                for &xx in &xs {
+                    s += u32::from(src[yy * w + xx]);
+                }
+            }
+            out[y * w + x] = s as f32 / 9.0;
+        }
+    }
+    out
+}
+
+/// Housing level (median of the four corner patches) and the image/housing threshold.
+fn housing_threshold(img: &[f32], w: usize, h: usize) -> (f32, f32) {
+    let p = (w.min(h) / 20).max(2);
+    let mut corner = Vec::with_capacity(4 * p * p);
+    for (x0, y0) in [(0, 0), (w - p, 0), (0, h - p), (w - p, h - p)] {
+        for y in y0..y0 + p {
+            corner.extend_from_slice(&img[y * w + x0..y * w + x0 + p]);
+        }
+    }
+    corner.sort_by(f32::total_cmp);
+    let housing = corner[corner.len() / 2];
+    let noise = corner[(corner.len() * 9) / 10] - housing;
+    let mut all: Vec<f32> = img.iter().step_by(3).copied().collect();
+    all.sort_by(f32::total_cmp);
+    let p95 = all[(all.len() * 95) / 100];
+    let t = housing + (0.1 * (p95 - housing)).max(3.0 * noise + 2.0);
+    (housing, t)
+}
+
+#[inline]
+fn bilinear1(img: &[f32], w: usize, h: usize, x: f64, y: f64) -> f32 {
+    // (x, y) in continuous pixel coordinates; centres at +0.5.
+    let fx = (x - 0.5).clamp(0.0, (w - 1) as f64);
+    let fy = (y - 0.5).clamp(0.0, (h - 1) as f64);
+    let x0 = fx.floor() as usize;
+    let y0 = fy.floor() as usize;
+    let x1 = (x0 + 1).min(w - 1);
+    let y1 = (y0 + 1).min(h - 1);
+    let ax = (fx - x0 as f64) as f32;
+    let ay = (fy - y0 as f64) as f32;
+    let top = img[y0 * w + x0] * (1.0 - ax) + img[y0 * w + x1] * ax;
+    let bot = img[y1 * w + x0] * (1.0 - ax) + img[y1 * w + x1] * ax;
+    top * (1.0 - ay) + bot * ay
+}
+
+/// Edge points on rays walked inwards from the frame edge towards `centre`.
+fn boundary_points(
+    img: &[f32],
+    w: usize,
+    h: usize,
+    centre: (f64, f64),
+    housing: f32,
+    threshold: f32,
+) -> Vec<(f64, f64)> {
+    const RAYS: usize = 720;
+    const STEP: f64 = 0.5;
+    let (cx, cy) = centre;
+    let (wf, hf) = (w as f64, h as f64);
+    let mut pts = Vec::with_capacity(RAYS);
+    let mut profile = Vec::new();
+    for i in 0..RAYS {
+        let a = i as f64 * std::f64::consts::TAU / RAYS as f64;
+        let (dx, dy) = (a.cos(), a.sin());
+        // Distance from centre to the frame edge (pixel-centre box) along the ray.
+        let tx = if dx > 0.0 {
+            (wf - 0.5 - cx) / dx
+        } else if dx < 0.0 {
+            (0.5 - cx) / dx
+        } else {
+            f64::INFINITY
+        };
+        let ty = if dy > 0.0 {
+            (hf - 0.5 - cy) / dy
+        } else if dy < 0.0 {
+            (0.5 - cy) / dy
+        } else {
+            f64::INFINITY
+        };
+        let t_edge = tx.min(ty);
+        if !(t_edge.is_finite() && t_edge > 4.0) {
+            continue;
+        }
+        // Profile sampled from the frame edge inwards.
+        profile.clear();
+        let n = (t_edge / STEP) as usize;
+        for k in 0..=n {
+            let t = t_edge - k as f64 * STEP;
+            profile.push(bilinear1(img, w, h, cx + t * dx, cy + t * dy));
+        }
+        let Some(first) = profile.iter().position(|&v| v > threshold) else {
+            continue;
+        };
+        // Starting inside the image means the circle is cut by the frame on this ray.
+        if first < 3 {
+            continue;
+        }
+        // Local image level just inside the crossing, then the half-way crossing.
+        let inner_end = (first + 8).min(profile.len());
+        let local = profile[first..inner_end]
+            .iter()
+            .copied()
+            .fold(0.0f32, f32::max);
+        let half = 0.5 * (housing + local);
+        let mut k = first;
+        while k > 0 && profile[k - 1] >= half {
+            k -= 1;
+        }
+        while k < profile.len() && profile[k] < half {
+            k += 1;
+        }
+        if k == 0 || k >= profile.len() {
+            continue;
+        }
+        let (v0, v1) = (profile[k - 1], profile[k]);
+        let frac = if v1 > v0 {
+            f64::from((half - v0) / (v1 - v0))
+        } else {
+            0.0
+        };
+        let t = t_edge - ((k - 1) as f64 + frac) * STEP;
+        pts.push((cx + t * dx, cy + t * dy));
+    }
+    pts
+}
+
+/// Algebraic (Kåsa) least-squares circle through points: minimises Σ(x²+y²+Dx+Ey+F)².
+fn kasa_fit(pts: &[(f64, f64)]) -> Option<Circle> {
+    if pts.len() < 3 {
+        return None;
+    }
+    // Centre the data for conditioning.
+    let n = pts.len() as f64;
+    let (mx, my) = pts
+        .iter()
+        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
+    let mut ata = nalgebra::Matrix3::<f64>::zeros();
+    let mut atb = nalgebra::Vector3::<f64>::zeros();
+    for &(x, y) in pts {
+        let (u, v) = (x - mx, y - my);
+        let row = nalgebra::Vector3::new(u, v, 1.0);
+        ata += row * row.transpose();
+        atb += row * (-(u * u + v * v));
+    }
+    let sol = ata.lu().solve(&atb)?;
+    let (a, b) = (-0.5 * sol[0], -0.5 * sol[1]);
+    let r2 = a * a + b * b - sol[2];
+    (r2 > 0.0 && r2.is_finite()).then(|| Circle {
+        cx: a + mx,
+        cy: b + my,
+        r: r2.sqrt(),
+    })
+}
+
+/// Geometric circle fit (Gauss–Newton on orthogonal distances) from a starting circle.
+fn geometric_fit(pts: &[(f64, f64)], start: Circle) -> Circle {
+    let mut c = start;
+    for _ in 0..20 {
+        let mut jtj = nalgebra::Matrix3::<f64>::zeros();
+        let mut jtr = nalgebra::Vector3::<f64>::zeros();
+        for &(x, y) in pts {
+            let (dx, dy) = (x - c.cx, y - c.cy);
+            let d = (dx * dx + dy * dy).sqrt();
+            if d < 1e-9 {
+                continue;
+            }
+            let res = d - c.r;
+            let j = nalgebra::Vector3::new(-dx / d, -dy / d, -1.0);
+            jtj += j * j.transpose();
+            jtr += j * res;
+        }
+        let Some(step) = jtj.lu().solve(&(-jtr)) else {
+            break;
+        };
+        c.cx += step[0];
+        c.cy += step[1];
+        c.r += step[2];
+        if step.norm() < 1e-6 {
+            break;
+        }
+    }
+    c
+}
+
+fn distance(c: &Circle, p: (f64, f64)) -> f64 {
+    ((p.0 - c.cx).hypot(p.1 - c.cy) - c.r).abs()
+}
+
+/// RANSAC over point triples (deterministic xorshift seed) then geometric refinement on inliers.
+fn robust_circle_fit(pts: &[(f64, f64)]) -> Result<CircleFit, FisheyeError> {
+    if pts.len() < 8 {
+        return Err(FisheyeError::NoCircle { points: pts.len() });
+    }
+    const ITERS: usize = 300;
+    const INLIER_PX: f64 = 1.5;
+    let mut state: u64 = 0x9E37_79B9_7F4A_7C15;
+    let mut next = |n: usize| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state % n as u64) as usize
+    };
+    let mut best: Option<(usize, Circle)> = None;
+    for _ in 0..ITERS {
+        let tri = [
+            pts[next(pts.len())],
+            pts[next(pts.len())],
+            pts[next(pts.len())],
+        ];
+        let Some(c) = kasa_fit(&tri) else { continue };
+        let count = pts.iter().filter(|&&p| distance(&c, p) < INLIER_PX).count();
+        if best.is_none_or(|(b, _)| count > b) {
+            best = Some((count, c));
+        }
+    }
+    let (_, mut circle) = best.ok_or(FisheyeError::NoCircle { points: pts.len() })?;
+    let mut inliers: Vec<(f64, f64)> = Vec::new();
+    // Refine, re-select inliers with a threshold that follows the spread of the residuals.
+    let mut tol = INLIER_PX;
+    for _ in 0..4 {
+        inliers = pts
+            .iter()
+            .copied()
+            .filter(|&p| distance(&circle, p) < tol)
+            .collect();
+        if inliers.len() < 8 {
+            return Err(FisheyeError::NoCircle {
+                points: inliers.len(),
+            });
+        }
+        let start = kasa_fit(&inliers).unwrap_or(circle);
+        circle = geometric_fit(&inliers, start);
+        let rms = rms_distance(&circle, &inliers);
+        tol = (3.0 * rms).clamp(0.75, INLIER_PX);
+    }
+    if !(circle.r.is_finite() && circle.r > 2.0) {
+        return Err(FisheyeError::NoCircle {
+            points: inliers.len(),
+        });
+    }
+    Ok(CircleFit {
+        circle,
+        residual_px: rms_distance(&circle, &inliers),
+        points: inliers.len(),
+        candidates: pts.len(),
+    })
+}
+
+fn rms_distance(c: &Circle, pts: &[(f64, f64)]) -> f64 {
+    let s: f64 = pts.iter().map(|&p| distance(c, p).powi(2)).sum();
+    (s / pts.len().max(1) as f64).sqrt()
+}
