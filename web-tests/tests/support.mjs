@@ -75,7 +75,8 @@ export async function phone(origin, { downloads = true } = {}) {
     isMobile: true,
     hasTouch: true,
     acceptDownloads: downloads,
-    permissions: ['camera'],
+    // The orientation sensors need these for deviceorientationabsolute events to carry values.
+    permissions: ['camera', 'accelerometer', 'gyroscope', 'magnetometer'],
     serviceWorkers: 'allow',
   });
   const requests = [];

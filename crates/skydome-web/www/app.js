@@ -132,7 +132,8 @@ let place = null; // {latitude_deg, longitude_deg} when the user allowed locatio
 async function buildOptions({ tap = null, time = null } = {}) {
   const o = { products: { preview: true } };
   const cam = settings.calibrate ? null : await profiles.active('camera');
-  o.response = cam ? { profile: JSON.parse(cam.json) } : { calibrate: {} };
+  // Without a stored profile the default response source applies: calibrate on this bracket.
+  if (cam) o.response = { profile: JSON.parse(cam.json) };
   if (settings.fisheye) {
     const lens = await profiles.active('lens');
     o.lens = lens
@@ -210,10 +211,16 @@ async function afterRun(result) {
   if (result.camera_profile) {
     const prof = JSON.parse(result.camera_profile);
     const name = [prof.make, prof.model].filter(Boolean).join(' ') || 'this phone\'s camera';
-    const hasActive = await profiles.active('camera');
-    await profiles.save('camera', name, result.camera_profile, !hasActive && lastRunSource === 'camera');
+    const stored = await profiles.list();
+    const hasActive = stored.some((p) => p.kind === 'camera' && p.active);
+    const known = stored.some((p) => p.kind === 'camera' && p.name === name);
+    // Stored the first time a camera is calibrated, or when a new calibration was asked for.
+    if (!known || settings.calibrate) {
+      await profiles.save('camera', name, result.camera_profile, (!hasActive && lastRunSource === 'camera') || settings.calibrate);
+    }
+    if (settings.calibrate) { settings.calibrate = false; writeForm(settings); saveSettings(); }
   }
-  if (result.lens_profile && !(await profiles.active('lens'))) {
+  if (result.lens_profile && !(await profiles.list()).some((p) => p.kind === 'lens')) {
     await profiles.save('lens', `${settings.model} ${settings.fov}°`, result.lens_profile, lastRunSource === 'camera');
   }
   const jpg = await ask('product', { name: 'preview' });
