@@ -20,19 +20,35 @@ const arg = (name, dflt) => {
 const size = Number(arg('--size', '3464')); // 3464² = 12.0 MP
 const outFile = arg('--out', null);
 
-function rendererRss() {
-  // Sum of the resident sets of Chromium's renderer processes (one tab is open).
-  let total = 0;
+/** Memory of this test's Chromium renderer processes (command lines carry the fresh profile's
+ *  folder, so other Chromium instances on the machine are not counted): for each, the resident
+ *  set (VmRSS, which also counts the shared Chromium binary and the camera's shared frames)
+ *  and its own memory (RssAnon + RssShmem: heaps, the wasm memory, frame buffers; like
+ *  Chrome's task manager's footprint, without the shared binary). The tab is the renderer
+ *  with the most; its worker runs in the same process. */
+function renderers(profile) {
+  const out = new Map();
   for (const pid of readdirSync('/proc').filter((d) => /^\d+$/.test(d))) {
     try {
       const cmd = readFileSync(`/proc/${pid}/cmdline`, 'latin1');
-      if (!cmd.includes('chromium') || !cmd.includes('--type=renderer')) continue;
-      const status = readFileSync(`/proc/${pid}/status`, 'latin1');
-      const m = status.match(/VmRSS:\s+(\d+) kB/);
-      if (m) total += Number(m[1]) * 1024;
+      if (!cmd.includes('--type=renderer') || !cmd.includes(profile)) continue;
+      const st = readFileSync(`/proc/${pid}/status`, 'latin1');
+      const kb = (k) => Number((st.match(new RegExp(`${k}:\\s+(\\d+) kB`)) || [0, 0])[1]) * 1024;
+      out.set(pid, { rss: kb('VmRSS'), anon: kb('RssAnon') + kb('RssShmem'), shmem: kb('RssShmem') });
     } catch { /* process ended */ }
   }
-  return total;
+  return out;
+}
+
+const peaks = new Map();
+function sample(profile) {
+  for (const [pid, m] of renderers(profile)) {
+    const p = peaks.get(pid) || { rss: 0, anon: 0, shmem: 0 };
+    peaks.set(pid, { rss: Math.max(p.rss, m.rss), anon: Math.max(p.anon, m.anon), shmem: Math.max(p.shmem, m.shmem) });
+  }
+}
+function tabPeak() {
+  return [...peaks.values()].reduce((a, b) => (b.rss > a.rss ? b : a), { rss: 0, anon: 0 });
 }
 
 const dir = tempDir('measure');
@@ -49,13 +65,20 @@ const cliMs = performance.now() - c0;
 
 const server = await serve();
 const p = await phone(server.origin);
-let peak = 0;
-const sampler = setInterval(() => { peak = Math.max(peak, rendererRss()); }, 100);
+const sampler = setInterval(() => sample(p.profile), 100);
 try {
+  // The gallery path alone: no camera (its frame buffers and the live lens detection are not
+  // part of a merge; the app stops the camera while merging anyway).
+  await p.page.addInitScript(() => {
+    navigator.mediaDevices.getUserMedia = () => Promise.reject(new DOMException('measuring without a camera', 'NotAllowedError'));
+  });
   await p.page.goto(`${server.origin}/`);
   await onScreen(p.page, 'camera');
   await setSettings(p.page, { fisheye: true, sun: 'auto', north: '0', equirect: false });
-  const baseline = rendererRss();
+  await p.page.waitForTimeout(1000);
+  sample(p.profile);
+  const baseline = tabPeak();
+  peaks.clear();
   const cdp = await p.context.newCDPSession(p.page);
   await cdp.send('Performance.enable');
   const since = await p.page.evaluate(() => Date.now());
@@ -64,7 +87,8 @@ try {
   const msg = await resultOrError(p.page, since);
   const wallMs = performance.now() - w0;
   if (msg) throw new Error(msg);
-  peak = Math.max(peak, rendererRss());
+  sample(p.profile);
+  const peak = tabPeak();
   const metrics = Object.fromEntries((await cdp.send('Performance.getMetrics')).metrics.map((m) => [m.name, m.value]));
   const core = await p.page.evaluate(() => window.__skydomeCoreMs);
   const wasm = await p.page.evaluate(() => window.__skydomeAsk('memory'));
@@ -77,8 +101,11 @@ try {
     browser_wall_s: wallMs / 1000,
     cli_s: cliMs / 1000,
     cli_binary: skydomeBin(),
-    tab_peak_rss_mb: peak / 2 ** 20,
-    tab_rss_before_mb: baseline / 2 ** 20,
+    tab_peak_rss_mb: peak.rss / 2 ** 20,
+    tab_peak_own_mb: peak.anon / 2 ** 20,
+    tab_peak_shmem_mb: peak.shmem / 2 ** 20,
+    tab_before_rss_mb: baseline.rss / 2 ** 20,
+    tab_before_own_mb: baseline.anon / 2 ** 20,
     wasm_memory_high_water_mb: wasm.wasmBytes / 2 ** 20,
     page_js_heap_used_mb: metrics.JSHeapUsedSize / 2 ** 20,
     wasm_bytes: raw,

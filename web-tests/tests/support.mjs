@@ -88,6 +88,7 @@ export async function phone(origin, { downloads = true } = {}) {
   return {
     context,
     page,
+    profile,
     requests,
     errors,
     /** URLs that left `origin` (data: and blob: URLs stay in the page). */

@@ -38,6 +38,10 @@ function clearMessage() { $('message').hidden = true; }
 function show(name) {
   for (const s of screens) $(`screen-${s}`).hidden = s !== name;
   document.body.dataset.screen = name;
+  // The camera runs only on its own screen: during a merge its frame buffers would share the
+  // phone's memory with the core.
+  if (name === 'camera' && !camera.running() && cameraWanted) startCamera();
+  if (name === 'work' && camera.running()) camera.stop();
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -279,6 +283,7 @@ function showFacts(result) {
     const li = document.createElement('li'); li.textContent = sentence(w); ul.append(li);
   }
   $('save-equirect').hidden = !lastRun.options.products.equirect;
+  $('tap-hint').hidden = !g;
   $('save-exr').hidden = false;
 }
 
@@ -438,7 +443,10 @@ async function findLens() {
   drawOverlay();
 }
 
+let cameraWanted = false;
+
 async function startCamera() {
+  cameraWanted = true;
   try {
     await camera.start($('video'));
     const caps = camera.manualExposure();

@@ -25,6 +25,16 @@ export async function start(video) {
   return track;
 }
 
+/** Stops the camera (while the core merges: frees the preview's frame buffers and battery). */
+export function stop() {
+  if (stream) for (const t of stream.getTracks()) t.stop();
+  stream = null;
+  track = null;
+}
+
+/** Whether the camera is running. */
+export function running() { return !!track && track.readyState === 'live'; }
+
 /** What manual exposure this camera offers: null when the bracket cannot be taken (Safari on
  *  iOS and desktop browsers expose no exposureMode/exposureTime). */
 export function manualExposure() {
