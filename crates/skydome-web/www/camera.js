@@ -10,13 +10,15 @@ export class CameraRefusal extends Error {}
 let stream = null;
 let track = null;
 
-/** Starts the rear camera at the largest size it offers and shows it in `video`. */
+/** Starts the rear camera and shows it in `video`. */
 export async function start(video) {
   if (!navigator.mediaDevices || !navigator.mediaDevices.getUserMedia) {
     throw new CameraRefusal('This browser gives no camera access here; pick photos from the gallery instead.');
   }
   stream = await navigator.mediaDevices.getUserMedia({
-    video: { facingMode: { ideal: 'environment' }, width: { ideal: 4032 }, height: { ideal: 3024 } },
+    // The live view needs no full resolution (takePhoto() uses the sensor's own photo size);
+    // a small stream keeps its frame buffers out of the merge's memory.
+    video: { facingMode: { ideal: 'environment' }, width: { ideal: 1280 }, height: { ideal: 960 } },
     audio: false,
   });
   track = stream.getVideoTracks()[0];
