@@ -66,40 +66,10 @@ pub enum Target {
 pub fn run(a: Args, quiet: bool) -> Result<()> {
     io::check_destination(&a.output, std::slice::from_ref(&a.input), a.force)?;
     let r = crate::radiance::read(&a.input)?;
-    let lens = match (&a.lens, a.dome) {
-        (Some(p), None) => crate::geometry::read_lens(p)?,
-        (None, Some(kind)) => {
-            // A cropped dome is square with the horizon circle inscribed.
-            let c = skydome::image::Circle {
-                cx: r.image.width as f64 / 2.0,
-                cy: r.image.height as f64 / 2.0,
-                r: r.image.width.min(r.image.height) as f64 / 2.0,
-            };
-            LensProfile::from_fov(c, 180.0, kind).context("dome lens")?
-        }
-        _ => bail!("give either --lens lens.json (an uncropped photo) or --dome MODEL (a 180° dome from merge --crop)"),
-    };
+    let lens = lens(&a, &r.image)?;
     let geom = SkyGeometry::new(&lens, a.north, a.device_pose, ImageOrientation::Normal)
         .context("sky geometry")?;
-    let target = match a.to {
-        Target::Equirect => MapProjection::Equirect {
-            width: a.size,
-            centre_azimuth_deg: a.centre_azimuth,
-        },
-        Target::Angular => MapProjection::Angular {
-            size: a.size,
-            centre_azimuth_deg: a.centre_azimuth,
-        },
-        Target::Mirrorball => MapProjection::MirrorBall {
-            size: a.size,
-            centre_azimuth_deg: a.centre_azimuth,
-        },
-        Target::Fisheye => MapProjection::Fisheye {
-            size: a.size,
-            model: LensKind::Equidistant,
-            fov_deg: 180.0,
-        },
-    };
+    let target = target(&a);
     let spin = io::spinner(quiet, "reprojecting");
     let map = reproject::reproject(
         &r.image,
@@ -145,4 +115,44 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The input's lens: a profile file, or a 180° dome whose horizon is inscribed in the image.
+fn lens(a: &Args, img: &skydome::HdrImage) -> Result<LensProfile> {
+    Ok(match (&a.lens, a.dome) {
+        (Some(p), None) => crate::geometry::read_lens(p)?,
+        (None, Some(kind)) => {
+            // A cropped dome is square with the horizon circle inscribed.
+            let c = skydome::image::Circle {
+                cx: img.width as f64 / 2.0,
+                cy: img.height as f64 / 2.0,
+                r: img.width.min(img.height) as f64 / 2.0,
+            };
+            LensProfile::from_fov(c, 180.0, kind).context("dome lens")?
+        }
+        _ => bail!("give either --lens lens.json (an uncropped photo) or --dome MODEL (a 180° dome from merge --crop)"),
+    })
+}
+
+/// The output map.
+fn target(a: &Args) -> MapProjection {
+    match a.to {
+        Target::Equirect => MapProjection::Equirect {
+            width: a.size,
+            centre_azimuth_deg: a.centre_azimuth,
+        },
+        Target::Angular => MapProjection::Angular {
+            size: a.size,
+            centre_azimuth_deg: a.centre_azimuth,
+        },
+        Target::Mirrorball => MapProjection::MirrorBall {
+            size: a.size,
+            centre_azimuth_deg: a.centre_azimuth,
+        },
+        Target::Fisheye => MapProjection::Fisheye {
+            size: a.size,
+            model: LensKind::Equidistant,
+            fov_deg: 180.0,
+        },
+    }
 }

@@ -11,6 +11,12 @@ fn shared() -> Option<PathBuf> {
     if p.is_dir() {
         Some(p)
     } else {
+        // CI sets SKYDOME_REQUIRE_SHARED_DATA=1 so a broken data path fails instead of skipping.
+        assert!(
+            std::env::var("SKYDOME_REQUIRE_SHARED_DATA").as_deref() != Ok("1"),
+            "{} not found but SKYDOME_REQUIRE_SHARED_DATA=1",
+            p.display()
+        );
         eprintln!("skipping: ../shared/data not found");
         None
     }
@@ -194,4 +200,36 @@ fn alpnach_fisheye_dome_finds_circle_and_sun() {
         ((sx - 83.5).powi(2) + (sy - 81.3).powi(2)).sqrt() < 8.0,
         "sun at ({sx}, {sy})"
     );
+}
+
+#[test]
+fn frobisher_frame_cut_short_is_refused_by_name() {
+    let Some(data) = shared() else {
+        return;
+    };
+    let dir = data.join("frobisher_001");
+    let tmp = tempfile::tempdir().unwrap();
+    let whole = std::fs::read(dir.join("IMG_2601.jpg")).unwrap();
+    for n in [30_000, 60_000, 100_000, 150_000, whole.len() - 3] {
+        let cut = tmp.path().join(format!("cut_{n}.jpg"));
+        std::fs::write(&cut, &whole[..n]).unwrap();
+        let out = tmp.path().join(format!("out_{n}.hdr"));
+        let o = Command::new(BIN)
+            .arg("merge")
+            .arg(dir.join("IMG_2600.jpg"))
+            .arg(&cut)
+            .arg(dir.join("IMG_2602.jpg"))
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "cut at {n}: {err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(
+            err.contains(&cut.display().to_string()) && err.contains("truncated"),
+            "{err}"
+        );
+        assert!(!out.exists());
+    }
 }

@@ -41,6 +41,27 @@ impl<T: Copy> RgbImage<T> {
         })
     }
 
+    /// Wraps an interleaved buffer, or says why it does not fit (`3 * width * height`
+    /// samples).
+    pub fn try_from_vec(
+        width: usize,
+        height: usize,
+        data: Vec<T>,
+    ) -> Result<Self, BufferSizeError> {
+        check_samples(data.len(), width, height, 3)?;
+        Ok(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// Checks that the buffer holds `3 * width * height` samples (the fields are public, so an
+    /// image built field by field may not).
+    pub fn validate(&self) -> Result<(), BufferSizeError> {
+        check_samples(self.data.len(), self.width, self.height, 3)
+    }
+
     /// Number of pixels (`width * height`).
     pub fn pixel_count(&self) -> usize {
         self.width * self.height
@@ -91,5 +112,98 @@ impl Circle {
         let dx = x as f64 + 0.5 - self.cx;
         let dy = y as f64 + 0.5 - self.cy;
         dx * dx + dy * dy <= self.r * self.r
+    }
+}
+
+/// A pixel position (origin top-left, `x` right, `y` down, pixel centres at `+0.5`), in
+/// continuous pixel units.
+///
+/// Its one text form is the seed's `-Y y +X x` (as in Radiance's resolution line), written in
+/// the `#SUN=` / `#NORTH=` header lines and the EXR `skydome:sun` / `skydome:north` attributes:
+/// `Display` writes it, `FromStr` reads it.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PixelPoint {
+    /// Column in pixels from the left edge.
+    pub x: f64,
+    /// Row in pixels from the top edge.
+    pub y: f64,
+}
+
+impl std::fmt::Display for PixelPoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "-Y {} +X {}", fmt_num(self.y), fmt_num(self.x))
+    }
+}
+
+/// A text that is not `-Y y +X x` with finite numbers.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("'{0}' is not a pixel position; expected '-Y <row> +X <column>'")]
+pub struct BadPixelPoint(pub String);
+
+impl std::str::FromStr for PixelPoint {
+    type Err = BadPixelPoint;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let bad = || BadPixelPoint(s.to_string());
+        let t: Vec<&str> = s.split_whitespace().collect();
+        let ["-Y", y, "+X", x] = t.as_slice() else {
+            return Err(bad());
+        };
+        let (x, y) = (
+            x.parse::<f64>().map_err(|_| bad())?,
+            y.parse::<f64>().map_err(|_| bad())?,
+        );
+        match x.is_finite() && y.is_finite() {
+            true => Ok(PixelPoint { x, y }),
+            false => Err(bad()),
+        }
+    }
+}
+
+/// A number for a text header: plain decimal from 1e-5 to 1e16 (and 0), scientific otherwise;
+/// the shortest text that reads back to the same `f64`.
+pub(crate) fn fmt_num(x: f64) -> String {
+    let a = x.abs();
+    if x == 0.0 || (1e-5..1e16).contains(&a) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
+/// A sample buffer whose length does not match its stated size.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("buffer holds {got} samples but {width}x{height} needs {expected}: pass a buffer of the stated size")]
+pub struct BufferSizeError {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Samples expected.
+    pub expected: usize,
+    /// Samples given.
+    pub got: usize,
+}
+
+/// Checks that a buffer of `len` samples holds `channels` samples for each of
+/// `width × height` pixels.
+pub fn check_samples(
+    len: usize,
+    width: usize,
+    height: usize,
+    channels: usize,
+) -> Result<(), BufferSizeError> {
+    let expected = width
+        .checked_mul(height)
+        .and_then(|n| n.checked_mul(channels))
+        .unwrap_or(usize::MAX);
+    match len == expected {
+        true => Ok(()),
+        false => Err(BufferSizeError {
+            width,
+            height,
+            expected,
+            got: len,
+        }),
     }
 }

@@ -1,10 +1,39 @@
 //! # skydome
 //!
 //! Calibrated HDR radiance maps of the sky-dome from bracketed photos taken through a fish-eye
-//! lens. The modules follow the pipeline, and data flows one way:
+//! lens. One entry point, [`pipeline::run`], runs the whole job; every shell (the `skydome`
+//! command line, the phone web app) calls it. The modules follow the pipeline, and data flows
+//! one way:
 //!
 //! ```text
-//! bracket ─▶ sampling/response ─▶ merge ─▶ fisheye/sky/reproject ─▶ formats ─▶ tonemap/plot/render
+//! bracket ─▶ fisheye (lens circle) ─▶ sampling/response ─▶ merge ─▶ fisheye crop/sky/reproject
+//!         ─▶ formats (.hdr, .exr, profiles, pictures) ─▶ tonemap/overlay/plot/render
+//!                        pipeline: runs the arrows in this order
+//! ```
+//!
+//! Photos in, a Radiance `.hdr` out:
+//!
+//! ```
+//! use skydome::formats::{encode_radiance, RadianceFormat};
+//! use skydome::pipeline::{self, EncodedFrame, Frames, Input, Options};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo");
+//! let mut frames = Vec::new();
+//! for name in ["frame_0.jpg", "frame_1.jpg", "frame_2.jpg"] {
+//!     let bytes = std::fs::read(format!("{dir}/{name}"))?;
+//!     frames.push(EncodedFrame { name: name.into(), bytes });
+//! }
+//! // Exposure times come from EXIF; these synthetic frames have none, so they are given (s).
+//! let input = Input {
+//!     times: Some(vec![0.001, 0.004, 0.016]),
+//!     ..Input::new(Frames::Encoded(frames))
+//! };
+//! let dome = pipeline::run(input, &Options::default(), &mut pipeline::no_progress)?;
+//! let hdr = encode_radiance(&dome.radiance, &dome.meta, RadianceFormat::Hdr)?.bytes;
+//! assert!(hdr.starts_with(b"#?RADIANCE"));
+//! println!("{}", serde_json::to_string(&dome.report)?);
+//! # Ok(()) }
 //! ```
 //!
 //! Conventions used throughout (stated where they are decided):

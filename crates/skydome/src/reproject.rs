@@ -75,18 +75,9 @@ pub enum ReprojectError {
         /// What the user can do.
         hint: &'static str,
     },
-    /// The source buffer does not match its size.
-    #[error("source image buffer holds {got} samples but {width}x{height} RGB needs {expected}: pass a consistent image")]
-    BufferSize {
-        /// Width.
-        width: usize,
-        /// Height.
-        height: usize,
-        /// Expected samples.
-        expected: usize,
-        /// Actual samples.
-        got: usize,
-    },
+    /// The sample buffer does not match the stated size.
+    #[error(transparent)]
+    BufferSize(#[from] crate::image::BufferSizeError),
     /// The output lens model cannot image the requested field of view.
     #[error(transparent)]
     Lens(#[from] crate::fisheye::FisheyeError),
@@ -573,13 +564,12 @@ pub fn reproject(
     target: &MapProjection,
     options: &ReprojectOptions,
 ) -> Result<HdrImage, ReprojectError> {
-    let expected = 3 * src.width * src.height;
-    if src.data.len() != expected || src.width == 0 || src.height == 0 {
-        return Err(ReprojectError::BufferSize {
-            width: src.width,
-            height: src.height,
-            expected,
-            got: src.data.len(),
+    src.validate()?;
+    if src.width == 0 || src.height == 0 {
+        return Err(ReprojectError::BadParameter {
+            what: "source image size (pixels)",
+            value: 0.0,
+            hint: "pass a non-empty image",
         });
     }
     if options.max_supersample == 0 || options.max_supersample > 64 {

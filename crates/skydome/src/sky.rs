@@ -75,17 +75,8 @@ pub enum SkyError {
     #[error("EXIF orientation {0} is not one of 1..=8: pass the tag from the file or 1 for none")]
     BadOrientation(u16),
     /// The sample buffer does not match the stated size.
-    #[error("buffer holds {got} samples but {width}x{height} needs {expected}: pass a buffer of the stated size")]
-    BufferSize {
-        /// Width in pixels.
-        width: usize,
-        /// Height in pixels.
-        height: usize,
-        /// Samples expected.
-        expected: usize,
-        /// Samples received.
-        got: usize,
-    },
+    #[error(transparent)]
+    BufferSize(#[from] crate::image::BufferSizeError),
     /// The lens profile is unusable.
     #[error(transparent)]
     Lens(#[from] crate::fisheye::FisheyeError),
@@ -487,14 +478,7 @@ pub fn detect_sun_luma(
     height: usize,
     region: &Circle,
 ) -> Result<Option<SunDetection>, SkyError> {
-    if luma.len() != width * height {
-        return Err(SkyError::BufferSize {
-            width,
-            height,
-            expected: width * height,
-            got: luma.len(),
-        });
-    }
+    crate::image::check_samples(luma.len(), width, height, 1)?;
     if !(region.r.is_finite() && region.r > 0.0 && region.cx.is_finite() && region.cy.is_finite()) {
         return Err(SkyError::BadParameter {
             what: "sun search radius (px)",

@@ -412,7 +412,7 @@ fn detection_rejects_blank_and_tiny_images() {
     ));
     assert!(matches!(
         detect_circle_luma(&[0u8; 10], 100, 100),
-        Err(FisheyeError::BufferSize { .. })
+        Err(FisheyeError::BufferSize(_))
     ));
 }
 

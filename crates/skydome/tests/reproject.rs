@@ -510,6 +510,6 @@ fn absurd_outputs_are_errors() {
             },
             &o
         ),
-        Err(ReprojectError::BufferSize { .. })
+        Err(ReprojectError::BufferSize(_))
     ));
 }

@@ -22,15 +22,7 @@ pub struct CircleFit {
 /// Uses the per-pixel maximum of R, G and B, so a saturated-blue sky and a red sunset horizon
 /// both stand out from the housing. See the module docs for the method.
 pub fn detect_circle(img: &RgbImage<u8>) -> Result<CircleFit, FisheyeError> {
-    let expected = 3 * img.width * img.height;
-    if img.data.len() != expected {
-        return Err(FisheyeError::BufferSize {
-            width: img.width,
-            height: img.height,
-            expected,
-            got: img.data.len(),
-        });
-    }
+    img.validate()?;
     let luma: Vec<u8> = img
         .data
         .chunks_exact(3)
@@ -49,14 +41,7 @@ pub fn detect_circle_luma(
     if width < 16 || height < 16 {
         return Err(FisheyeError::ImageTooSmall { width, height });
     }
-    if luma.len() != width * height {
-        return Err(FisheyeError::BufferSize {
-            width,
-            height,
-            expected: width * height,
-            got: luma.len(),
-        });
-    }
+    crate::image::check_samples(luma.len(), width, height, 1)?;
     let img = blur3(luma, width, height);
     let (housing, threshold) = housing_threshold(&img, width, height);
 

@@ -78,17 +78,8 @@ pub enum FisheyeError {
         height: usize,
     },
     /// The sample buffer does not match the stated size.
-    #[error("buffer holds {got} samples but {width}x{height} needs {expected}: pass a buffer of the stated size")]
-    BufferSize {
-        /// Width in pixels.
-        width: usize,
-        /// Height in pixels.
-        height: usize,
-        /// Samples expected.
-        expected: usize,
-        /// Samples received.
-        got: usize,
-    },
+    #[error(transparent)]
+    BufferSize(#[from] crate::image::BufferSizeError),
     /// No boundary between housing and image was found.
     #[error("no lens circle found ({points} boundary points): use the best-exposed frame, or give the circle by hand")]
     NoCircle {

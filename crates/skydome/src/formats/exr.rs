@@ -250,21 +250,6 @@ fn text(name: &str, value: &str) -> Result<Text, ExrError> {
     })
 }
 
-fn point_text(p: &PixelPoint) -> String {
-    format!("-Y {} +X {}", fmt_num(p.y), fmt_num(p.x))
-}
-
-fn parse_point(s: &str) -> Option<PixelPoint> {
-    let t: Vec<&str> = s.split_whitespace().collect();
-    match t.as_slice() {
-        ["-Y", y, "+X", x] => {
-            let (x, y) = (x.parse::<f64>().ok()?, y.parse::<f64>().ok()?);
-            (x.is_finite() && y.is_finite()).then_some(PixelPoint { x, y })
-        }
-        _ => None,
-    }
-}
-
 const DATE_FORMAT: &[time::format_description::BorrowedFormatItem<'static>] =
     time::macros::format_description!("[year]:[month]:[day] [hour]:[minute]:[second]");
 
@@ -313,7 +298,7 @@ fn layer_attributes(meta: &HdrMeta) -> Result<LayerAttributes, ExrError> {
         custom.push((ATTR_VIEW, v.clone()));
     }
     if let Some(s) = &meta.sun {
-        custom.push((ATTR_SUN, point_text(&s.pixel)));
+        custom.push((ATTR_SUN, s.pixel.to_string()));
         if let Some(az) = s.azimuth_deg {
             custom.push((ATTR_SUN_AZIMUTH, fmt_num(az)));
         }
@@ -322,7 +307,7 @@ fn layer_attributes(meta: &HdrMeta) -> Result<LayerAttributes, ExrError> {
         }
     }
     if let Some(n) = &meta.north {
-        custom.push((ATTR_NORTH, point_text(n)));
+        custom.push((ATTR_NORTH, n.to_string()));
     }
     for (name, value) in custom {
         a.other
@@ -452,7 +437,7 @@ fn meta_from_header(h: &Header, texts: &[(String, String)]) -> HdrMeta {
             .and_then(|(c, o)| gmt_from_offset(c, o))
     });
     let sun = get(ATTR_SUN)
-        .and_then(|s| parse_point(&s))
+        .and_then(|s| s.parse::<PixelPoint>().ok())
         .map(|pixel| SunMark {
             pixel,
             azimuth_deg: num(ATTR_SUN_AZIMUTH),
@@ -464,7 +449,7 @@ fn meta_from_header(h: &Header, texts: &[(String, String)]) -> HdrMeta {
         gmt,
         view: get(ATTR_VIEW),
         sun,
-        north: get(ATTR_NORTH).and_then(|s| parse_point(&s)),
+        north: get(ATTR_NORTH).and_then(|s| s.parse::<PixelPoint>().ok()),
         software: a.software_name.as_ref().map(|t| t.to_string()),
         other: a
             .comments

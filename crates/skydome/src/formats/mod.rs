@@ -13,15 +13,7 @@ pub mod lens_profile;
 pub mod picture;
 pub mod rgbe;
 
-/// A pixel position in an output image (origin top-left, `x` right, `y` down, pixel centres at
-/// `+0.5`), as written in the seed's `#SUN=-Y y +X x` / `#NORTH=-Y y +X x` header lines.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct PixelPoint {
-    /// Column in pixels from the left edge.
-    pub x: f64,
-    /// Row in pixels from the top edge.
-    pub y: f64,
-}
+pub use crate::image::PixelPoint;
 
 /// The sun as marked in an output file.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -372,18 +372,7 @@ fn validate_image(image: &HdrImage) -> Result<(), RgbeError> {
 }
 
 /// Shortest text that parses back to exactly `x`; plain decimals for everyday magnitudes.
-pub(crate) fn fmt_num(x: f64) -> String {
-    let a = x.abs();
-    if x == 0.0 || (1e-5..1e16).contains(&a) {
-        format!("{x}")
-    } else {
-        format!("{x:e}")
-    }
-}
-
-fn fmt_point(p: &PixelPoint) -> String {
-    format!("-Y {} +X {}", fmt_num(p.y), fmt_num(p.x))
-}
+pub(crate) use crate::image::fmt_num;
 
 /// True for `YYYY:MM:DD HH:MM:SS`.
 pub(crate) fn is_exif_datetime(s: &str) -> bool {
@@ -505,13 +494,13 @@ fn header_text(image: &HdrImage, meta: &HdrMeta) -> Result<String, RgbeError> {
         h.push_str(&format!("VIEW= {v}\n"));
     }
     if let Some(s) = &meta.sun {
-        h.push_str(&format!("#SUN={}\n", fmt_point(&s.pixel)));
+        h.push_str(&format!("#SUN={}\n", s.pixel));
         if let Some(d) = sun_direction_text(s) {
             h.push_str(&format!("#SUN_DIRECTION={d}\n"));
         }
     }
     if let Some(n) = &meta.north {
-        h.push_str(&format!("#NORTH={}\n", fmt_point(n)));
+        h.push_str(&format!("#NORTH={n}\n"));
     }
     for line in &meta.other {
         h.push_str(line);
@@ -688,17 +677,6 @@ enum Line {
     Other,
 }
 
-fn parse_point(s: &str) -> Option<PixelPoint> {
-    let t: Vec<&str> = s.split_whitespace().collect();
-    match t.as_slice() {
-        ["-Y", y, "+X", x] => {
-            let (x, y) = (x.parse::<f64>().ok()?, y.parse::<f64>().ok()?);
-            (x.is_finite() && y.is_finite()).then_some(PixelPoint { x, y })
-        }
-        _ => None,
-    }
-}
-
 fn parse_sun_direction(s: &str) -> Option<(Option<f64>, Option<f64>)> {
     let mut az = None;
     let mut el = None;
@@ -753,13 +731,16 @@ fn classify(line: &str) -> Line {
         return text(v, Line::View);
     }
     if let Some(v) = value("#SUN=") {
-        return parse_point(v).map_or(Line::Other, Line::Sun);
+        return v.parse::<PixelPoint>().ok().map_or(Line::Other, Line::Sun);
     }
     if let Some(v) = value("#SUN_DIRECTION=") {
         return parse_sun_direction(v).map_or(Line::Other, |(a, e)| Line::SunDirection(a, e));
     }
     if let Some(v) = value("#NORTH=") {
-        return parse_point(v).map_or(Line::Other, Line::North);
+        return v
+            .parse::<PixelPoint>()
+            .ok()
+            .map_or(Line::Other, Line::North);
     }
     Line::Other
 }

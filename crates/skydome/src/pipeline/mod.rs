@@ -20,25 +20,7 @@
 //! Encoders return bytes ([`crate::formats::encode_radiance`],
 //! [`crate::formats::picture::encode_rgb8`]); writing files is the shell's business.
 //!
-//! ```
-//! use skydome::formats::{encode_radiance, RadianceFormat};
-//! use skydome::pipeline::{self, EncodedFrame, Frames, Input, Options};
-//!
-//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo");
-//! let frames = (0..3)
-//!     .map(|i| -> std::io::Result<EncodedFrame> {
-//!         let name = format!("frame_{i}.jpg");
-//!         Ok(EncodedFrame { bytes: std::fs::read(format!("{dir}/{name}"))?, name })
-//!     })
-//!     .collect::<Result<Vec<_>, _>>()?;
-//! // The demo frames carry no EXIF: their exposure times (seconds) are given.
-//! let input = Input { times: Some(vec![1.0 / 400.0, 1.0 / 100.0, 1.0 / 25.0]), ..Input::new(Frames::Encoded(frames)) };
-//! let dome = pipeline::run(input, &Options::default(), &mut pipeline::no_progress)?;
-//! let hdr: Vec<u8> = encode_radiance(&dome.radiance, &dome.meta, RadianceFormat::Hdr)?.bytes;
-//! assert!(hdr.starts_with(b"#?RADIANCE"));
-//! # Ok(()) }
-//! ```
+//! See the crate documentation for a complete example.
 
 mod sky_stage;
 

@@ -5,12 +5,19 @@ use std::path::{Path, PathBuf};
 
 use skydome::bracket::{Exposure, Frame, Pixels};
 
-/// `../shared/data` beside the repository, or `None` (with a message) in a fresh clone.
+/// `../shared/data` beside the repository, or `None` (with a message) in a fresh clone; a
+/// failure instead when `SKYDOME_REQUIRE_SHARED_DATA=1` (CI).
 pub fn data_dir() -> Option<PathBuf> {
     let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
     if d.is_dir() {
         Some(d)
     } else {
+        // CI sets SKYDOME_REQUIRE_SHARED_DATA=1 so a broken data path fails instead of skipping.
+        assert!(
+            std::env::var("SKYDOME_REQUIRE_SHARED_DATA").as_deref() != Ok("1"),
+            "{} not found but SKYDOME_REQUIRE_SHARED_DATA=1",
+            d.display()
+        );
         eprintln!("skipping: ../shared/data not found");
         None
     }

@@ -218,6 +218,12 @@ pub fn shared_data(sub: &str) -> Option<PathBuf> {
     if p.is_dir() {
         Some(p)
     } else {
+        // CI sets SKYDOME_REQUIRE_SHARED_DATA=1 so a broken data path fails instead of skipping.
+        assert!(
+            std::env::var("SKYDOME_REQUIRE_SHARED_DATA").as_deref() != Ok("1"),
+            "{} not found but SKYDOME_REQUIRE_SHARED_DATA=1",
+            p.display()
+        );
         eprintln!("skipping: ../shared/data not found ({})", p.display());
         None
     }

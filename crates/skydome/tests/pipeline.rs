@@ -1,0 +1,349 @@
+//! The pipeline's own rules: stages and cancellation, options as JSON, which options need a
+//! lens, the orientation still in force, the Radiance view table, the equirectangular defaults,
+//! the radiance formats' rules, and the frame the circle is detected on.
+
+use std::ops::ControlFlow;
+
+use skydome::bracket::{self, CaptureInfo, DecodedFrame, OrientationPolicy, Pixels};
+use skydome::fisheye::{self, LensKind};
+use skydome::formats::exr::{ExrOptions, ExrPixelType};
+use skydome::formats::{self, HdrMeta, RadianceError, RadianceFormat};
+use skydome::image::HdrImage;
+use skydome::pipeline::{
+    self, EncodedFrame, Frames, Input, LensSource, Options, PipelineError, Progress, SkyOptions,
+    Stage,
+};
+
+fn demo_input() -> Input {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo");
+    let frames = (0..3)
+        .map(|i| EncodedFrame {
+            name: format!("frame_{i}.jpg"),
+            bytes: std::fs::read(format!("{dir}/frame_{i}.jpg")).expect("demo frame"),
+        })
+        .collect();
+    Input {
+        times: Some(vec![0.001, 0.004, 0.016]),
+        ..Input::new(Frames::Encoded(frames))
+    }
+}
+
+#[test]
+fn stages_come_in_order_from_zero_to_one() {
+    let mut ev: Vec<Progress> = Vec::new();
+    let dome = pipeline::run(demo_input(), &Options::default(), &mut |p| {
+        ev.push(*p);
+        ControlFlow::Continue(())
+    })
+    .expect("run");
+    let stages: Vec<Stage> = ev.iter().map(|p| p.stage).fold(Vec::new(), |mut v, s| {
+        if v.last() != Some(&s) {
+            v.push(s);
+        }
+        v
+    });
+    use Stage::*;
+    assert_eq!(stages, [Decoding, Lens, Calibrating, Merging, Pictures]);
+    for s in stages {
+        let f: Vec<f64> = ev
+            .iter()
+            .filter(|p| p.stage == s)
+            .map(|p| p.fraction)
+            .collect();
+        assert_eq!(f.first(), Some(&0.0), "{s:?}");
+        assert_eq!(f.last(), Some(&1.0), "{s:?}");
+        assert!(f.windows(2).all(|w| w[0] <= w[1]), "{s:?}: {f:?}");
+    }
+    // Nothing unrequested is made.
+    assert!(dome.preview.is_none() && dome.overlay.is_none() && dome.equirect.is_none());
+    assert!(dome.confidence.is_none() && dome.lens_profile.is_none());
+    assert_eq!(dome.report.response, "calibrated on this bracket");
+    assert!(dome.camera_profile.is_some());
+}
+
+#[test]
+fn cancel_stops_at_the_next_check() {
+    for stop in [
+        Stage::Decoding,
+        Stage::Calibrating,
+        Stage::Merging,
+        Stage::Pictures,
+    ] {
+        let mut seen_after = false;
+        let r = pipeline::run(demo_input(), &Options::default(), &mut |p| {
+            seen_after |= p.stage as u8 > stop as u8;
+            match p.stage == stop {
+                true => ControlFlow::Break(()),
+                false => ControlFlow::Continue(()),
+            }
+        });
+        assert!(matches!(r, Err(PipelineError::Cancelled)), "{stop:?}");
+        assert!(!seen_after, "{stop:?}: a later stage ran");
+    }
+}
+
+#[test]
+fn decoded_and_encoded_input_give_the_same_dome() {
+    let a = pipeline::run(
+        demo_input(),
+        &Options::default(),
+        &mut pipeline::no_progress,
+    )
+    .expect("encoded");
+    let Frames::Encoded(enc) = demo_input().frames else {
+        unreachable!()
+    };
+    let decoded = enc
+        .iter()
+        .map(|f| bracket::decode(&f.name, &f.bytes, &Default::default()).expect("decode"))
+        .collect();
+    let input = Input {
+        frames: Frames::Decoded(decoded),
+        ..demo_input()
+    };
+    let b = pipeline::run(input, &Options::default(), &mut pipeline::no_progress).expect("decoded");
+    assert_eq!(a.radiance, b.radiance);
+    assert_eq!(a.report, b.report);
+}
+
+#[test]
+fn options_read_from_json_with_defaults() {
+    let o: Options = serde_json::from_str("{}").expect("empty options");
+    assert_eq!(o, Options::default());
+    let text = r#"{"lens":{"detect":{"model":"equisolid","fov_deg":185,"circle":null}},
+        "sky":{"crop":true,"north_deg":12.5,"sun":{"tap":{"x":10,"y":20}},"pose":"screen_up"},
+        "products":{"preview":true,"equirect":{"width":512}}, "weighting":"none"}"#;
+    let o: Options = serde_json::from_str(text).expect("options");
+    assert_eq!(
+        o.lens,
+        LensSource::Detect {
+            model: LensKind::Equisolid,
+            fov_deg: 185.0,
+            circle: None
+        }
+    );
+    assert!(o.sky.crop && o.sky.north_deg == Some(12.5) && o.sky.fov_out_deg == 180.0);
+    assert_eq!(o.products.equirect.and_then(|e| e.width), Some(512));
+    let back: Options = serde_json::from_str(&serde_json::to_string(&o).expect("ser")).expect("de");
+    assert_eq!(back, o);
+    assert!(serde_json::from_str::<Options>(r#"{"sky":{"sun":"sideways"}}"#).is_err());
+}
+
+#[test]
+fn sky_options_without_a_lens_are_refused_before_decoding() {
+    let crop = Options {
+        sky: SkyOptions {
+            crop: true,
+            ..SkyOptions::default()
+        },
+        ..Options::default()
+    };
+    let mut decoded = false;
+    let r = pipeline::run(demo_input(), &crop, &mut |p| {
+        decoded |= p.stage == Stage::Decoding;
+        ControlFlow::Continue(())
+    });
+    assert!(matches!(r, Err(PipelineError::NeedsLens(_))), "{r:?}");
+    assert!(!decoded);
+}
+
+fn frame(name: &str, orientation: u16, pixels: Pixels, t: f64) -> DecodedFrame {
+    DecodedFrame {
+        name: name.into(),
+        width: 4,
+        height: 2,
+        pixels,
+        exif_time_s: Some(t),
+        iso: None,
+        f_number: None,
+        info: CaptureInfo {
+            orientation,
+            ..CaptureInfo::default()
+        },
+        non_srgb_icc: None,
+    }
+}
+
+#[test]
+fn orientation_in_force_is_one_once_applied_and_the_stored_value_when_ignored() {
+    let px = |k: u8| Pixels::U8((0..24).map(|i| (i * 9 + 7) as u8 / k).collect());
+    let frames = || vec![frame("a", 6, px(1), 0.01), frame("b", 6, px(3), 0.04)];
+    let applied = bracket::assemble(frames(), None, OrientationPolicy::Apply).expect("apply");
+    assert_eq!(applied.pixel_orientation, 1);
+    assert_eq!((applied.width(), applied.height()), (2, 4), "rotated");
+    let kept = bracket::assemble(frames(), None, OrientationPolicy::Ignore).expect("ignore");
+    assert_eq!(kept.pixel_orientation, 6);
+    assert_eq!((kept.width(), kept.height()), (4, 2));
+    assert_eq!(
+        "ignore".parse::<OrientationPolicy>(),
+        Ok(OrientationPolicy::Ignore)
+    );
+    assert!("sideways".parse::<OrientationPolicy>().is_err());
+}
+
+#[test]
+fn circle_is_found_on_the_best_exposed_frame_with_16_bit_codes_rounded() {
+    // 2699 / 257 = 10.502: rounds to 11 (a shift by 8 would give 10).
+    let v = 257 * 10 + 129;
+    let f = |p: Pixels, t| bracket::Frame {
+        name: "f".into(),
+        width: 4,
+        height: 2,
+        pixels: p,
+        exposure: bracket::Exposure {
+            time_s: t,
+            iso: None,
+            f_number: None,
+        },
+    };
+    let dark = f(Pixels::U16(vec![v; 24]), 0.01);
+    let mid = f(Pixels::U16(vec![257 * 100; 24]), 0.04);
+    let best = bracket::best_exposed_u8(&[dark.clone(), mid]);
+    assert!(best.data.iter().all(|&z| z == 100));
+    let only = bracket::best_exposed_u8(&[dark]);
+    assert!(only.data.iter().all(|&z| z == 11));
+}
+
+#[test]
+fn one_photo_needs_no_exposure_time_for_circle_detection() {
+    let Frames::Encoded(mut enc) = demo_input().frames else {
+        unreachable!()
+    };
+    let one = Input::new(Frames::Encoded(vec![enc.remove(1)]));
+    let (fit, photo) = pipeline::detect_lens_circle(one).expect("circle");
+    // demo/circle.txt: 200,200,192
+    assert!((fit.circle.cx - 200.0).abs() < 1.5 && (fit.circle.cy - 200.0).abs() < 1.5);
+    assert!((fit.circle.r - 192.0).abs() < 1.5, "{:?}", fit.circle);
+    assert_eq!((photo.width, photo.height), (400, 400));
+    // Two photos are a bracket: they need their times.
+    let two = Input::new(Frames::Encoded(enc));
+    match pipeline::detect_lens_circle(two) {
+        Err(PipelineError::Bracket(bracket::BracketError::MissingExposure { .. })) => {}
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn radiance_view_names_only_what_radiance_can_read() {
+    let v = |k, fov| fisheye::radiance_view(k, fov);
+    assert_eq!(
+        v(LensKind::Equidistant, 180.0).as_deref(),
+        Some("-vta -vh 180 -vv 180")
+    );
+    assert_eq!(
+        v(LensKind::Stereographic, 180.0).as_deref(),
+        Some("-vts -vh 180 -vv 180")
+    );
+    assert_eq!(
+        v(LensKind::Orthographic, 180.0).as_deref(),
+        Some("-vth -vh 180 -vv 180")
+    );
+    assert_eq!(v(LensKind::Equisolid, 180.0), None);
+    assert_eq!(v(LensKind::Polynomial, 180.0), None);
+    assert_eq!(v(LensKind::Equidistant, 170.0), None);
+}
+
+#[test]
+fn equirect_width_is_four_radii_even_and_bounded() {
+    assert_eq!(pipeline::default_equirect_width(192.0), 768);
+    assert_eq!(pipeline::default_equirect_width(100.3), 400);
+    assert_eq!(pipeline::default_equirect_width(100.6), 402);
+    assert_eq!(pipeline::default_equirect_width(3.0), 64);
+    assert_eq!(pipeline::default_equirect_width(1e6), 8192);
+    let m = HdrMeta {
+        capdate: Some("2026:06:21 13:30:00".into()),
+        view: Some("-vta".into()),
+        north: Some(skydome::formats::PixelPoint { x: 1.0, y: 2.0 }),
+        ..HdrMeta::default()
+    };
+    let e = pipeline::equirect_meta(&m);
+    assert_eq!(e.capdate, m.capdate);
+    assert!(e.view.is_none() && e.north.is_none() && e.sun.is_none());
+}
+
+#[test]
+fn half_float_overflow_switches_to_float_and_says_so() {
+    let img = HdrImage {
+        width: 2,
+        height: 1,
+        data: vec![1.0, 2.0, 3.0, 1.0e5, 0.5, 7e5],
+    };
+    let half =
+        RadianceFormat::from_extension("EXR", ExrOptions::from(ExrPixelType::Half)).expect("exr");
+    let e = formats::encode_radiance(&img, &HdrMeta::default(), half).expect("encode");
+    assert_eq!(e.warnings.len(), 1, "{:?}", e.warnings);
+    assert_eq!(formats::read_radiance(&e.bytes).expect("read").image, img);
+    let small = HdrImage {
+        data: vec![1.0; 6],
+        ..img
+    };
+    let e = formats::encode_radiance(&small, &HdrMeta::default(), half).expect("encode");
+    assert!(e.warnings.is_empty());
+    assert_eq!(
+        RadianceFormat::from_extension("tif", ExrOptions::default()),
+        None
+    );
+}
+
+#[test]
+fn reading_sniffs_the_signature_and_applies_exposure() {
+    let img = HdrImage {
+        width: 8,
+        height: 1,
+        data: (0..24).map(|i| 0.5 + i as f32).collect(),
+    };
+    let meta = HdrMeta {
+        exposure: Some(2.0),
+        ..HdrMeta::default()
+    };
+    let bytes = formats::encode_radiance(&img, &meta, RadianceFormat::Hdr)
+        .expect("encode")
+        .bytes;
+    let r = formats::read_radiance(&bytes).expect("read");
+    assert_eq!(r.format, "Radiance RGBE");
+    for (a, b) in r.image.data.iter().zip(&img.data) {
+        assert!((a * 2.0 - b).abs() <= b / 128.0, "{a} vs {b}");
+    }
+    assert!(matches!(
+        formats::read_radiance(b"P6\n1 1\n255\n\0\0\0"),
+        Err(RadianceError::Unrecognised)
+    ));
+}
+
+#[test]
+fn pixel_point_has_one_text_form() {
+    use skydome::image::PixelPoint;
+    let p: PixelPoint = "-Y 20.5 +X 10.25".parse().expect("point");
+    assert_eq!(p, PixelPoint { x: 10.25, y: 20.5 });
+    assert_eq!(p.to_string(), "-Y 20.5 +X 10.25");
+    let tiny = PixelPoint { x: 1e-9, y: 3.0 };
+    assert_eq!(tiny.to_string().parse::<PixelPoint>(), Ok(tiny));
+    for bad in [
+        "",
+        "-Y 1",
+        "+X 1 -Y 2",
+        "-Y a +X 1",
+        "-Y NaN +X 1",
+        "-Y 1 +X inf",
+    ] {
+        assert!(bad.parse::<PixelPoint>().is_err(), "{bad}");
+    }
+}
+
+#[test]
+fn images_are_checked_against_their_size() {
+    use skydome::image::RgbImage;
+    assert!(RgbImage::try_from_vec(2, 2, vec![0u8; 12]).is_ok());
+    let e = RgbImage::try_from_vec(2, 2, vec![0u8; 11]).unwrap_err();
+    assert_eq!((e.expected, e.got), (12, 11));
+    let broken = RgbImage {
+        width: 3,
+        height: 1,
+        data: vec![0u8; 3],
+    };
+    assert!(broken.validate().is_err());
+    assert!(matches!(
+        fisheye::detect_circle(&broken),
+        Err(fisheye::FisheyeError::BufferSize(_))
+    ));
+}
