@@ -22,7 +22,9 @@ use skydome::formats::exr::ExrOptions;
 use skydome::formats::picture::{encode_rgb8, PictureFormat, DEFAULT_JPEG_QUALITY};
 use skydome::formats::{encode_radiance, PixelPoint, RadianceFormat};
 use skydome::image::Circle;
-use skydome::pipeline::{self, Dome, EncodedFrame, Frames, Input, Options, PipelineError, Progress};
+use skydome::pipeline::{
+    self, Dome, EncodedFrame, Frames, Input, Options, PipelineError, Progress,
+};
 use skydome::response::CameraProfile;
 use skydome::sky::{DevicePose, ImageOrientation, SkyGeometry};
 use wasm_bindgen::prelude::*;
@@ -60,6 +62,7 @@ impl std::fmt::Display for WebError {
 pub fn sentence(message: &str) -> String {
     let one_line = message.split_whitespace().collect::<Vec<_>>().join(" ");
     let first = one_line.split([' ', ':']).next().unwrap_or("");
+    let first = first.trim_end_matches([',', ';', '!', '?', '.']);
     let plain_word = first.chars().all(|c| c.is_alphabetic() || c == '\'');
     let mut s = match plain_word {
         true => {
@@ -148,7 +151,11 @@ impl Job {
         let times = (!times.is_empty()).then_some(times);
         let mut cb = |stage: &str, fraction: f64| {
             progress
-                .call2(&JsValue::NULL, &JsValue::from_str(stage), &JsValue::from_f64(fraction))
+                .call2(
+                    &JsValue::NULL,
+                    &JsValue::from_str(stage),
+                    &JsValue::from_f64(fraction),
+                )
                 .map(|v| v.is_truthy())
                 .unwrap_or(false)
         };
@@ -319,8 +326,7 @@ pub fn check_lens_profile(json: &str) -> Result<String, JsError> {
     let l = LensProfile::from_json(json)
         .and_then(|l| l.validate().map(|()| l))
         .map_err(|e| WebError::Profile(format!("not a usable lens profile: {e}")))?;
-    Ok(l.to_json()
-        .map_err(|e| WebError::Profile(e.to_string()))?)
+    Ok(l.to_json().map_err(|e| WebError::Profile(e.to_string()))?)
 }
 
 /// Marks for the live camera overlay, in the photo's displayed pixels.
@@ -369,8 +375,8 @@ pub fn live_overlay(
     let lens = match lens_json.is_empty() {
         false => LensProfile::from_json(lens_json).map_err(|e| WebError::Profile(e.to_string()))?,
         true => {
-            let circle: Circle = serde_json::from_str(circle_json)
-                .map_err(|e| WebError::Options(e.to_string()))?;
+            let circle: Circle =
+                serde_json::from_str(circle_json).map_err(|e| WebError::Options(e.to_string()))?;
             let kind: LensKind = serde_json::from_value(serde_json::Value::String(model.into()))
                 .map_err(|e| WebError::Options(e.to_string()))?;
             LensProfile::from_fov(circle, fov_deg, kind)
@@ -411,7 +417,11 @@ pub fn photo_exposure(name: String, bytes: Vec<u8>) -> Result<String, JsError> {
 /// Exposure times for photos without EXIF from a list file in the command line's
 /// `--times-file` format (lines `FILE TIME`, `#` comments; times as `0.004` or `1/250`):
 /// the times of `names`, in that order, in seconds.
-pub fn times_from_list(list_name: &str, text: &str, names: &[String]) -> Result<Vec<f64>, WebError> {
+pub fn times_from_list(
+    list_name: &str,
+    text: &str,
+    names: &[String],
+) -> Result<Vec<f64>, WebError> {
     let pairs = skydome::bracket::parse_list_file(list_name, text)
         .map_err(|e| WebError::Pipeline(e.into()))?;
     names

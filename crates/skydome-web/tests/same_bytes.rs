@@ -54,7 +54,11 @@ fn web_surface_writes_the_pipelines_bytes() {
         .expect("web run");
         let web = Outcome::from_dome(dome);
         let ours = web.hdr_bytes().expect("hdr");
-        assert_eq!(ours, direct(frames.clone(), times.clone(), &o), "options {json}");
+        assert_eq!(
+            ours,
+            direct(frames.clone(), times.clone(), &o),
+            "options {json}"
+        );
         // Progress reached the page: every stage started and ended, in order.
         assert_eq!(events.first().map(|e| e.0.as_str()), Some("decoding"));
         assert_eq!(events.last(), Some(&("pictures".to_string(), 1.0)));
@@ -82,7 +86,12 @@ fn tap_in_the_preview_maps_to_the_input_photo() {
     let mut o2 = o.clone();
     o2.sky.sun = SunMode::Tap(PixelPoint { x: tap.x, y: tap.y });
     let again = run_frames(frames, Some(times), &o2, &mut |_, _| false).expect("run");
-    let s2 = again.report.geometry.expect("geometry").sun.expect("tapped sun");
+    let s2 = again
+        .report
+        .geometry
+        .expect("geometry")
+        .sun
+        .expect("tapped sun");
     assert!((s2.pixel.x - sun.x).abs() < 1e-9 && (s2.pixel.y - sun.y).abs() < 1e-9);
 }
 
@@ -101,8 +110,12 @@ fn cancelling_from_the_page_stops_the_run() {
 
 #[test]
 fn times_list_names_the_missing_file() {
-    let e = times_from_list("times.txt", "a.jpg 1/100\n", &["a.jpg".into(), "b.jpg".into()])
-        .expect_err("b has no time");
+    let e = times_from_list(
+        "times.txt",
+        "a.jpg 1/100\n",
+        &["a.jpg".into(), "b.jpg".into()],
+    )
+    .expect_err("b has no time");
     assert_eq!(
         skydome_web::sentence(&e.to_string()),
         "times.txt: no exposure time for b.jpg."

@@ -14,7 +14,7 @@ function sentence(err) {
   const msg = String(err && err.message ? err.message : err).split(/\s+/).join(' ').trim();
   if (!msg) return 'Something went wrong.';
   // Capitalised unless it starts with a file name, which keeps its spelling.
-  const first = msg.split(/[ :]/)[0];
+  const first = msg.split(/[ :]/)[0].replace(/[,;!?.]+$/, '');
   const s = /^[\p{L}']+$/u.test(first) ? msg[0].toUpperCase() + msg.slice(1) : msg;
   return /[.!?]$/.test(s) ? s : s + '.';
 }
