@@ -40,11 +40,16 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         "serving {} at http://{shown}/ (Ctrl-C stops)",
         a.dir.display()
     ));
+    // One thread per request: a client that stops reading (a closed tab in the middle of the
+    // .wasm) must not stall the others.
     for request in server.incoming_requests() {
-        let response = respond(&a.dir, request.method(), request.url());
-        if let Err(e) = request.respond(response) {
-            crate::io::warn(quiet, &format!("cannot answer a request: {e}"));
-        }
+        let dir = a.dir.clone();
+        std::thread::spawn(move || {
+            let response = respond(&dir, request.method(), request.url());
+            if let Err(e) = request.respond(response) {
+                crate::io::warn(quiet, &format!("cannot answer a request: {e}"));
+            }
+        });
     }
     Ok(())
 }
