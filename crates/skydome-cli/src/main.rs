@@ -18,6 +18,7 @@ mod merge;
 mod pictures;
 mod radiance;
 mod reproject;
+mod serve;
 mod synth;
 mod tonemap;
 mod views;
@@ -65,6 +66,8 @@ enum Command {
     Demo(demo::Args),
     /// Write a synthetic fish-eye bracket with known radiance and response (ground truth).
     Synth(synth::Args),
+    /// Serve the built phone web app over HTTP (development; localhost is a secure context).
+    Serve(serve::Args),
 }
 
 fn main() -> ExitCode {
@@ -101,6 +104,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Command::Histogram(a) => views::histogram(a, quiet),
         Command::Render(a) => views::render(a, quiet),
         Command::Demo(a) => demo::run(a, quiet),
+        Command::Serve(a) => serve::run(a, quiet),
     }
 }
 

@@ -1,0 +1,498 @@
+//! # skydome-web
+//!
+//! The WebAssembly surface of the skydome phone app: a thin shell over
+//! [`skydome::pipeline::run`]. It takes the photos' bytes and the pipeline's
+//! [`Options`] as JSON, and hands back encoded bytes (Radiance `.hdr`, OpenEXR, JPEG) and the
+//! pipeline's report as JSON. It decides nothing about images: every rule lives in the library,
+//! so the phone and the laptop write the same file from the same frames (`tests/same_bytes.rs`
+//! proves it against the library; the browser tests in `web-tests/` against the command line).
+//!
+//! The static app that loads this module lives in `www/` beside this crate; `build.sh` builds
+//! both into one folder.
+//!
+//! Conventions are the library's: pixels origin top-left, `x` right, `y` down, in the input
+//! photos' pixels unless said otherwise; angles in degrees; azimuth from true north towards
+//! east; the phone's compass heading is the azimuth of its top edge.
+
+use std::ops::ControlFlow;
+
+use serde::Serialize;
+use skydome::fisheye::{LensKind, LensProfile};
+use skydome::formats::exr::ExrOptions;
+use skydome::formats::picture::{encode_rgb8, PictureFormat, DEFAULT_JPEG_QUALITY};
+use skydome::formats::{encode_radiance, PixelPoint, RadianceFormat};
+use skydome::image::Circle;
+use skydome::pipeline::{
+    self, Dome, EncodedFrame, Frames, Input, Options, PipelineError, Progress,
+};
+use skydome::response::CameraProfile;
+use skydome::sky::{DevicePose, ImageOrientation, SkyGeometry};
+use wasm_bindgen::prelude::*;
+
+/// An error of the web surface, shown to the user as one sentence ([`sentence`]).
+#[derive(Debug)]
+pub enum WebError {
+    /// The pipeline failed (its message names the file where one is to blame).
+    Pipeline(PipelineError),
+    /// The options JSON from the page did not parse.
+    Options(String),
+    /// A profile file did not parse.
+    Profile(String),
+    /// Something the page asked for does not exist (e.g. the equirect map was not made).
+    Missing(&'static str),
+    /// Encoding an output failed.
+    Encode(String),
+}
+
+impl std::fmt::Display for WebError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            WebError::Pipeline(PipelineError::Cancelled) => f.write_str("cancelled"),
+            WebError::Pipeline(e) => write!(f, "{e}"),
+            WebError::Options(e) => write!(f, "the app's options are not valid ({e})"),
+            WebError::Profile(e) => write!(f, "{e}"),
+            WebError::Missing(what) => write!(f, "{what} was not made in this run"),
+            WebError::Encode(e) => write!(f, "cannot encode the file: {e}"),
+        }
+    }
+}
+
+/// One human sentence for the screen: the message on one line, ending in a full stop, and
+/// capitalised unless it starts with a file name (which keeps its spelling).
+pub fn sentence(message: &str) -> String {
+    let one_line = message.split_whitespace().collect::<Vec<_>>().join(" ");
+    let first = one_line.split([' ', ':']).next().unwrap_or("");
+    let first = first.trim_end_matches([',', ';', '!', '?', '.']);
+    let plain_word = first.chars().all(|c| c.is_alphabetic() || c == '\'');
+    let mut s = match plain_word {
+        true => {
+            let mut chars = one_line.chars();
+            match chars.next() {
+                Some(c) => c.to_uppercase().chain(chars).collect::<String>(),
+                None => return "Something went wrong.".to_string(),
+            }
+        }
+        false => one_line,
+    };
+    if !s.ends_with(['.', '!', '?']) {
+        s.push('.');
+    }
+    s
+}
+
+impl From<WebError> for JsError {
+    fn from(e: WebError) -> JsError {
+        JsError::new(&sentence(&e.to_string()))
+    }
+}
+
+/// Parses the page's options: [`Options`] as JSON (snake_case field names, every field
+/// optional).
+pub fn parse_options(json: &str) -> Result<Options, WebError> {
+    serde_json::from_str(json).map_err(|e| WebError::Options(e.to_string()))
+}
+
+/// Runs the pipeline on encoded photos. `times` (seconds, in the order of `frames`) overrides
+/// EXIF when given. `progress` gets `(stage name, fraction)` and returns `true` to cancel.
+pub fn run_frames(
+    frames: Vec<EncodedFrame>,
+    times: Option<Vec<f64>>,
+    options: &Options,
+    progress: &mut dyn FnMut(&str, f64) -> bool,
+) -> Result<Dome, WebError> {
+    let input = Input {
+        times,
+        ..Input::new(Frames::Encoded(frames))
+    };
+    let mut forward = |p: &Progress| match progress(p.stage.name(), p.fraction) {
+        true => ControlFlow::Break(()),
+        false => ControlFlow::Continue(()),
+    };
+    pipeline::run(input, options, &mut forward).map_err(WebError::Pipeline)
+}
+
+/// A bracket being assembled by the page: photos are added one by one, then [`Job::run`] runs
+/// the pipeline. The photos stay in the job, so a second run (e.g. with a tapped sun) needs no
+/// second upload.
+#[wasm_bindgen]
+#[derive(Default)]
+pub struct Job {
+    frames: Vec<EncodedFrame>,
+}
+
+#[wasm_bindgen]
+impl Job {
+    /// An empty job.
+    #[wasm_bindgen(constructor)]
+    pub fn new() -> Job {
+        Job::default()
+    }
+
+    /// Adds one photo (JPEG, PNG or TIFF bytes); `name` is used in messages (the file name).
+    pub fn add_frame(&mut self, name: String, bytes: Vec<u8>) {
+        self.frames.push(EncodedFrame { name, bytes });
+    }
+
+    /// Number of photos added.
+    pub fn frame_count(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Runs the pipeline with `options_json` ([`Options`] as JSON). `times` are exposure times
+    /// in seconds in the order the photos were added (empty: from EXIF). `progress(stage,
+    /// fraction)` is called between steps; returning `true` cancels.
+    pub fn run(
+        &self,
+        options_json: &str,
+        times: Vec<f64>,
+        progress: &js_sys::Function,
+    ) -> Result<Outcome, JsError> {
+        let options = parse_options(options_json)?;
+        let times = (!times.is_empty()).then_some(times);
+        let mut cb = |stage: &str, fraction: f64| {
+            progress
+                .call2(
+                    &JsValue::NULL,
+                    &JsValue::from_str(stage),
+                    &JsValue::from_f64(fraction),
+                )
+                .map(|v| v.is_truthy())
+                .unwrap_or(false)
+        };
+        let dome = run_frames(self.frames.clone(), times, &options, &mut cb)?;
+        Ok(Outcome { dome })
+    }
+}
+
+/// The products of one run, encoded on demand.
+#[wasm_bindgen]
+pub struct Outcome {
+    dome: Dome,
+}
+
+impl Outcome {
+    /// Wraps a pipeline result (for native callers and tests).
+    pub fn from_dome(dome: Dome) -> Outcome {
+        Outcome { dome }
+    }
+
+    /// The pipeline's result.
+    pub fn dome(&self) -> &Dome {
+        &self.dome
+    }
+
+    fn radiance(&self, format: RadianceFormat) -> Result<Vec<u8>, WebError> {
+        encode_radiance(&self.dome.radiance, &self.dome.meta, format)
+            .map(|e| e.bytes)
+            .map_err(|e| WebError::Encode(e.to_string()))
+    }
+
+    /// The radiance map as Radiance `.hdr` bytes (the library's encoder: `#SUN=`, `#NORTH=`,
+    /// `CAPDATE=` lines).
+    pub fn hdr_bytes(&self) -> Result<Vec<u8>, WebError> {
+        self.radiance(RadianceFormat::Hdr)
+    }
+
+    /// The radiance map as OpenEXR (half, ZIP; float when values exceed half's range).
+    pub fn exr_bytes(&self) -> Result<Vec<u8>, WebError> {
+        self.radiance(RadianceFormat::Exr(ExrOptions::default()))
+    }
+
+    /// The equirectangular map as `.hdr`, when it was asked for.
+    pub fn equirect_hdr_bytes(&self) -> Result<Vec<u8>, WebError> {
+        let (img, meta) = self
+            .dome
+            .equirect
+            .as_ref()
+            .ok_or(WebError::Missing("the equirectangular map"))?;
+        encode_radiance(img, meta, RadianceFormat::Hdr)
+            .map(|e| e.bytes)
+            .map_err(|e| WebError::Encode(e.to_string()))
+    }
+
+    /// The tone-mapped preview (or, with `overlay`, the overlay picture) as JPEG.
+    pub fn picture_jpeg(&self, overlay: bool) -> Result<Vec<u8>, WebError> {
+        let (pic, what) = match overlay {
+            true => (&self.dome.overlay, "the overlay picture"),
+            false => (&self.dome.preview, "the preview"),
+        };
+        let pic = pic.as_ref().ok_or(WebError::Missing(what))?;
+        encode_rgb8(
+            pic,
+            PictureFormat::Jpeg {
+                quality: DEFAULT_JPEG_QUALITY,
+            },
+        )
+        .map_err(|e| WebError::Encode(e.to_string()))
+    }
+
+    /// The input-photo pixel under output pixel `(x, y)`: the output is the input shifted by
+    /// the crop (the lens circle's centre in the input sits at the horizon's centre in the
+    /// output). Without a lens the two are the same.
+    pub fn input_pixel(&self, x: f64, y: f64) -> PixelPoint {
+        match &self.dome.report.geometry {
+            Some(g) => PixelPoint {
+                x: x + g.lens.circle.cx - g.horizon.cx,
+                y: y + g.lens.circle.cy - g.horizon.cy,
+            },
+            None => PixelPoint { x, y },
+        }
+    }
+}
+
+#[wasm_bindgen]
+impl Outcome {
+    /// The pipeline's report as JSON (frames, response, warnings, geometry, header metadata).
+    pub fn report_json(&self) -> String {
+        serde_json::to_string(&self.dome.report).unwrap_or_else(|_| "{}".to_string())
+    }
+
+    /// Width of the radiance map and the preview, pixels.
+    pub fn width(&self) -> usize {
+        self.dome.radiance.width
+    }
+
+    /// Height of the radiance map and the preview, pixels.
+    pub fn height(&self) -> usize {
+        self.dome.radiance.height
+    }
+
+    /// Radiance `.hdr` bytes.
+    pub fn hdr(&self) -> Result<Vec<u8>, JsError> {
+        Ok(self.hdr_bytes()?)
+    }
+
+    /// OpenEXR bytes.
+    pub fn exr(&self) -> Result<Vec<u8>, JsError> {
+        Ok(self.exr_bytes()?)
+    }
+
+    /// The equirectangular map as `.hdr` bytes.
+    pub fn equirect_hdr(&self) -> Result<Vec<u8>, JsError> {
+        Ok(self.equirect_hdr_bytes()?)
+    }
+
+    /// Preview JPEG bytes.
+    pub fn preview_jpeg(&self) -> Result<Vec<u8>, JsError> {
+        Ok(self.picture_jpeg(false)?)
+    }
+
+    /// Overlay JPEG bytes (circles, north, sun drawn on the preview).
+    pub fn overlay_jpeg(&self) -> Result<Vec<u8>, JsError> {
+        Ok(self.picture_jpeg(true)?)
+    }
+
+    /// The camera profile made by calibrating on this bracket, as the CLI's JSON; empty when
+    /// a stored profile was used.
+    pub fn camera_profile_json(&self) -> String {
+        self.dome
+            .camera_profile
+            .as_ref()
+            .map(CameraProfile::to_json)
+            .unwrap_or_default()
+    }
+
+    /// The lens profile used, as the CLI's JSON; empty without a lens.
+    pub fn lens_profile_json(&self) -> String {
+        self.dome
+            .lens_profile
+            .as_ref()
+            .and_then(|l| l.to_json().ok())
+            .unwrap_or_default()
+    }
+
+    /// `[x, y]`: the input-photo pixel under output (preview) pixel `(x, y)`; see
+    /// [`Outcome::input_pixel`].
+    pub fn to_input_pixel(&self, x: f64, y: f64) -> Vec<f64> {
+        let p = self.input_pixel(x, y);
+        vec![p.x, p.y]
+    }
+}
+
+/// Checks a camera profile file (the CLI's `camera.json`) and returns it re-serialised; the
+/// error names what is wrong.
+#[wasm_bindgen]
+pub fn check_camera_profile(json: &str) -> Result<String, JsError> {
+    let p = CameraProfile::from_json(json)
+        .map_err(|e| WebError::Profile(format!("not a usable camera profile: {e}")))?;
+    p.response()
+        .map_err(|e| WebError::Profile(format!("not a usable camera profile: {e}")))?;
+    Ok(p.to_json())
+}
+
+/// Checks a lens profile file (the CLI's `lens.json`) and returns it re-serialised.
+#[wasm_bindgen]
+pub fn check_lens_profile(json: &str) -> Result<String, JsError> {
+    let l = LensProfile::from_json(json)
+        .and_then(|l| l.validate().map(|()| l))
+        .map_err(|e| WebError::Profile(format!("not a usable lens profile: {e}")))?;
+    Ok(l.to_json().map_err(|e| WebError::Profile(e.to_string()))?)
+}
+
+/// Marks for the live camera overlay, in the photo's displayed pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LiveMarks {
+    /// The lens's visible circle.
+    pub circle: Circle,
+    /// The 180° horizon circle.
+    pub horizon: Circle,
+    /// Where true north meets the horizon, when a heading is known.
+    pub north: Option<PixelPoint>,
+}
+
+/// The live overlay's marks for `lens` and a compass heading (azimuth of the phone's top edge,
+/// degrees; `None` when unknown), for a phone lying screen-down, camera up, photo upright
+/// (`SkyGeometry` with `DevicePose::ScreenDown`). For that pose the library's north point is
+/// `(cx + R·sin h, cy − R·cos h)` with `R` the horizon radius: heading 0 puts north at the top
+/// and east on the left (the mirror of a map, because the camera looks up).
+pub fn live_marks(lens: &LensProfile, heading_deg: Option<f64>) -> Result<LiveMarks, WebError> {
+    let geom = SkyGeometry::new(
+        lens,
+        heading_deg.unwrap_or(0.0),
+        DevicePose::ScreenDown,
+        ImageOrientation::Normal,
+    )
+    .map_err(|e| WebError::Profile(e.to_string()))?;
+    Ok(LiveMarks {
+        circle: lens.circle,
+        horizon: geom.horizon_circle(),
+        north: heading_deg.map(|_| geom.north_point()),
+    })
+}
+
+/// The live overlay's marks as JSON (`{circle, horizon, north}`) for a lens profile JSON, or —
+/// when `lens_json` is empty — the nominal model `model` (`equidistant`, `stereographic`, …)
+/// with full field of view `fov_deg` across `circle_json` (`{cx, cy, r}`). `heading_deg` NaN
+/// means no compass.
+#[wasm_bindgen]
+pub fn live_overlay(
+    lens_json: &str,
+    circle_json: &str,
+    model: &str,
+    fov_deg: f64,
+    heading_deg: f64,
+) -> Result<String, JsError> {
+    let lens = match lens_json.is_empty() {
+        false => LensProfile::from_json(lens_json).map_err(|e| WebError::Profile(e.to_string()))?,
+        true => {
+            let circle: Circle =
+                serde_json::from_str(circle_json).map_err(|e| WebError::Options(e.to_string()))?;
+            let kind: LensKind = serde_json::from_value(serde_json::Value::String(model.into()))
+                .map_err(|e| WebError::Options(e.to_string()))?;
+            LensProfile::from_fov(circle, fov_deg, kind)
+                .map_err(|e| WebError::Profile(e.to_string()))?
+        }
+    };
+    let heading = heading_deg.is_finite().then_some(heading_deg);
+    let marks = live_marks(&lens, heading)?;
+    Ok(serde_json::to_string(&marks).map_err(|e| WebError::Encode(e.to_string()))?)
+}
+
+/// Detects the fish-eye image circle in one photo (e.g. a frame of the live camera as JPEG);
+/// returns the fit as JSON (`{circle: {cx, cy, r}, residual_px, points, candidates}`).
+#[wasm_bindgen]
+pub fn detect_circle(name: String, bytes: Vec<u8>) -> Result<String, JsError> {
+    let input = Input::new(Frames::Encoded(vec![EncodedFrame { name, bytes }]));
+    let (fit, _) = pipeline::detect_lens_circle(input).map_err(WebError::Pipeline)?;
+    Ok(serde_json::to_string(&fit).map_err(|e| WebError::Encode(e.to_string()))?)
+}
+
+/// What a photo's EXIF says about its exposure, as JSON (`{exif_time_s, iso, f_number, width,
+/// height}`, unknown fields null): the capture screen reads it back after each shot to check that
+/// the camera obeyed the requested exposure time.
+#[wasm_bindgen]
+pub fn photo_exposure(name: String, bytes: Vec<u8>) -> Result<String, JsError> {
+    let d = skydome::bracket::decode(&name, &bytes, &skydome::bracket::DecodeOptions::default())
+        .map_err(|e| WebError::Pipeline(e.into()))?;
+    let v = serde_json::json!({
+        "exif_time_s": d.exif_time_s,
+        "iso": d.iso,
+        "f_number": d.f_number,
+        "width": d.width,
+        "height": d.height,
+    });
+    Ok(v.to_string())
+}
+
+/// Exposure times for photos without EXIF from a list file in the command line's
+/// `--times-file` format (lines `FILE TIME`, `#` comments; times as `0.004` or `1/250`):
+/// the times of `names`, in that order, in seconds.
+pub fn times_from_list(
+    list_name: &str,
+    text: &str,
+    names: &[String],
+) -> Result<Vec<f64>, WebError> {
+    let pairs = skydome::bracket::parse_list_file(list_name, text)
+        .map_err(|e| WebError::Pipeline(e.into()))?;
+    names
+        .iter()
+        .map(|n| {
+            pairs
+                .iter()
+                .find(|(file, _)| file == n)
+                .map(|(_, t)| *t)
+                .ok_or_else(|| WebError::Profile(format!("{list_name}: no exposure time for {n}")))
+        })
+        .collect()
+}
+
+/// [`times_from_list`] for the page.
+#[wasm_bindgen]
+pub fn list_times(list_name: &str, text: &str, names: Vec<String>) -> Result<Vec<f64>, JsError> {
+    Ok(times_from_list(list_name, text, &names)?)
+}
+
+/// The library's version (`SOFTWARE=skydome <version>` in headers).
+#[wasm_bindgen]
+pub fn version() -> String {
+    skydome::VERSION.to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sentence_is_one_capitalised_line_with_a_full_stop() {
+        assert_eq!(
+            sentence("frame_0.jpg: cannot decode:\n  bad\tmarker"),
+            "frame_0.jpg: cannot decode: bad marker."
+        );
+        assert_eq!(sentence("cancelled"), "Cancelled.");
+        assert_eq!(sentence("done!"), "Done!");
+        assert_eq!(sentence("calibration failed: x"), "Calibration failed: x.");
+        assert_eq!(sentence(""), "Something went wrong.");
+    }
+
+    #[test]
+    fn options_json_has_defaults_and_rejects_unknown_shapes() {
+        let o = parse_options("{}").expect("empty options");
+        assert_eq!(o, Options::default());
+        assert!(parse_options("{\"sky\": {\"north_deg\": \"east\"}}").is_err());
+    }
+
+    /// The formula the app states on screen is the library's north point, for every heading and
+    /// for lenses of several sizes.
+    #[test]
+    fn stated_north_formula_matches_the_library() {
+        for (cx, cy, r, fov, kind) in [
+            (512.0, 384.0, 300.0, 180.0, LensKind::Equidistant),
+            (1224.0, 1224.0, 1180.0, 235.0, LensKind::Stereographic),
+            (150.0, 150.0, 140.0, 200.0, LensKind::Equisolid),
+        ] {
+            let lens = LensProfile::from_fov(Circle { cx, cy, r }, fov, kind).expect("lens");
+            for h in [0.0, 37.0, 90.0, 135.5, 180.0, 271.0, 359.0] {
+                let m = live_marks(&lens, Some(h)).expect("marks");
+                let n = m.north.expect("north");
+                let rh = m.horizon.r;
+                let (s, c) = f64::to_radians(h).sin_cos();
+                assert!((n.x - (cx + rh * s)).abs() < 1e-6, "h {h}: x {}", n.x);
+                assert!((n.y - (cy - rh * c)).abs() < 1e-6, "h {h}: y {}", n.y);
+            }
+            // East at heading 0 is on the left: the compass point at azimuth 90.
+            let g = SkyGeometry::new(&lens, 0.0, DevicePose::ScreenDown, ImageOrientation::Normal)
+                .expect("geometry");
+            assert!(g.compass_point(90.0).x < cx - 0.5 * r);
+        }
+    }
+}

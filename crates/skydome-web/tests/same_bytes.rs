@@ -1,0 +1,123 @@
+//! The web surface adds nothing: the same frames and options give the same bytes through it as
+//! through `skydome::pipeline` directly, on the bundled fish-eye bracket with several option
+//! sets; and the page's JSON reaches the pipeline unchanged.
+
+use skydome::formats::{encode_radiance, PixelPoint, RadianceFormat};
+use skydome::pipeline::{self, EncodedFrame, Frames, Input, Options, SunMode};
+use skydome_web::{parse_options, run_frames, times_from_list, Outcome};
+
+fn demo() -> (Vec<EncodedFrame>, Vec<f64>) {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo");
+    let names: Vec<String> = (0..3).map(|i| format!("frame_{i}.jpg")).collect();
+    let frames = names
+        .iter()
+        .map(|n| EncodedFrame {
+            name: n.clone(),
+            bytes: std::fs::read(format!("{dir}/{n}")).expect("demo frame"),
+        })
+        .collect();
+    let list = std::fs::read_to_string(format!("{dir}/times.txt")).expect("demo times");
+    let times = times_from_list("times.txt", &list, &names).expect("times");
+    (frames, times)
+}
+
+fn direct(frames: Vec<EncodedFrame>, times: Vec<f64>, o: &Options) -> Vec<u8> {
+    let input = Input {
+        times: Some(times),
+        ..Input::new(Frames::Encoded(frames))
+    };
+    let dome = pipeline::run(input, o, &mut pipeline::no_progress).expect("pipeline");
+    encode_radiance(&dome.radiance, &dome.meta, RadianceFormat::Hdr)
+        .expect("encode")
+        .bytes
+}
+
+#[test]
+fn web_surface_writes_the_pipelines_bytes() {
+    let (frames, times) = demo();
+    assert_eq!(times, vec![0.001, 0.004, 0.016]);
+    let cases = [
+        r#"{}"#,
+        r#"{"lens": {"detect": {"model": "stereographic", "fov_deg": 235, "circle": null}},
+            "sky": {"crop": true, "north_deg": 37, "sun": "auto"}, "products": {"preview": true}}"#,
+        r#"{"lens": {"detect": {"model": "equidistant", "fov_deg": 200, "circle": null}},
+            "sky": {"crop": false, "north_deg": 301.5, "sun": {"tap": {"x": 150.5, "y": 120.25}}},
+            "weighting": "none"}"#,
+    ];
+    for json in cases {
+        let o = parse_options(json).expect("options");
+        let mut events = Vec::new();
+        let dome = run_frames(frames.clone(), Some(times.clone()), &o, &mut |s, f| {
+            events.push((s.to_string(), f));
+            false
+        })
+        .expect("web run");
+        let web = Outcome::from_dome(dome);
+        let ours = web.hdr_bytes().expect("hdr");
+        assert_eq!(
+            ours,
+            direct(frames.clone(), times.clone(), &o),
+            "options {json}"
+        );
+        // Progress reached the page: every stage started and ended, in order.
+        assert_eq!(events.first().map(|e| e.0.as_str()), Some("decoding"));
+        assert_eq!(events.last(), Some(&("pictures".to_string(), 1.0)));
+    }
+}
+
+#[test]
+fn tap_in_the_preview_maps_to_the_input_photo() {
+    let (frames, times) = demo();
+    let o = parse_options(
+        r#"{"lens": {"detect": {"model": "stereographic", "fov_deg": 235, "circle": null}},
+            "sky": {"crop": true, "north_deg": 0, "sun": "auto"}}"#,
+    )
+    .expect("options");
+    let web = Outcome::from_dome(
+        run_frames(frames.clone(), Some(times.clone()), &o, &mut |_, _| false).expect("run"),
+    );
+    let g = web.dome().report.geometry.clone().expect("geometry");
+    // The horizon's centre in the output is the lens circle's centre in the input.
+    let c = web.input_pixel(g.horizon.cx, g.horizon.cy);
+    assert!((c.x - g.lens.circle.cx).abs() < 1e-9 && (c.y - g.lens.circle.cy).abs() < 1e-9);
+    // A tap given in output pixels, mapped back, lands on the same output pixel as the sun.
+    let sun = g.sun.expect("sun detected").pixel;
+    let tap = web.input_pixel(sun.x, sun.y);
+    let mut o2 = o.clone();
+    o2.sky.sun = SunMode::Tap(PixelPoint { x: tap.x, y: tap.y });
+    let again = run_frames(frames, Some(times), &o2, &mut |_, _| false).expect("run");
+    let s2 = again
+        .report
+        .geometry
+        .expect("geometry")
+        .sun
+        .expect("tapped sun");
+    assert!((s2.pixel.x - sun.x).abs() < 1e-9 && (s2.pixel.y - sun.y).abs() < 1e-9);
+}
+
+#[test]
+fn cancelling_from_the_page_stops_the_run() {
+    let (frames, times) = demo();
+    let mut calls = 0;
+    let e = run_frames(frames, Some(times), &Options::default(), &mut |s, _| {
+        calls += 1;
+        s == "calibrating"
+    })
+    .expect_err("cancelled");
+    assert_eq!(skydome_web::sentence(&e.to_string()), "Cancelled.");
+    assert!(calls >= 2);
+}
+
+#[test]
+fn times_list_names_the_missing_file() {
+    let e = times_from_list(
+        "times.txt",
+        "a.jpg 1/100\n",
+        &["a.jpg".into(), "b.jpg".into()],
+    )
+    .expect_err("b has no time");
+    assert_eq!(
+        skydome_web::sentence(&e.to_string()),
+        "times.txt: no exposure time for b.jpg."
+    );
+}

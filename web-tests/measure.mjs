@@ -1,0 +1,120 @@
+// Measures the phone app on a 3 × 12 MP fish-eye bracket (made by `skydome synth`) in headless
+// Chromium: the time in the core (worker), the wall time from picking the photos to the
+// preview, the tab's peak memory (renderer process resident set, sampled every 100 ms; the
+// worker runs in the same process), the wasm linear memory's high-water mark, and the native
+// CLI's time for the same frames and options. Also the gzipped .wasm size.
+//   node measure.mjs [--size 3464] [--out results.json]
+// Speed is measured here, never asserted in tests.
+import { execFileSync } from 'node:child_process';
+import { readFileSync, readdirSync, writeFileSync } from 'node:fs';
+import path from 'node:path';
+import { gzipSync } from 'node:zlib';
+import {
+  appDir, onScreen, phone, resultOrError, serve, setSettings, skydomeBin, tempDir,
+} from './tests/support.mjs';
+
+const arg = (name, dflt) => {
+  const i = process.argv.indexOf(name);
+  return i > 0 ? process.argv[i + 1] : dflt;
+};
+const size = Number(arg('--size', '3464')); // 3464² = 12.0 MP
+const outFile = arg('--out', null);
+
+/** Memory of this test's Chromium renderer processes (command lines carry the fresh profile's
+ *  folder, so other Chromium instances on the machine are not counted): for each, the resident
+ *  set (VmRSS, which also counts the shared Chromium binary and the camera's shared frames)
+ *  and its own memory (RssAnon + RssShmem: heaps, the wasm memory, frame buffers; like
+ *  Chrome's task manager's footprint, without the shared binary). The tab is the renderer
+ *  with the most; its worker runs in the same process. */
+function renderers(profile) {
+  const out = new Map();
+  for (const pid of readdirSync('/proc').filter((d) => /^\d+$/.test(d))) {
+    try {
+      const cmd = readFileSync(`/proc/${pid}/cmdline`, 'latin1');
+      if (!cmd.includes('--type=renderer') || !cmd.includes(profile)) continue;
+      const st = readFileSync(`/proc/${pid}/status`, 'latin1');
+      const kb = (k) => Number((st.match(new RegExp(`${k}:\\s+(\\d+) kB`)) || [0, 0])[1]) * 1024;
+      out.set(pid, { rss: kb('VmRSS'), anon: kb('RssAnon') + kb('RssShmem'), shmem: kb('RssShmem') });
+    } catch { /* process ended */ }
+  }
+  return out;
+}
+
+const peaks = new Map();
+function sample(profile) {
+  for (const [pid, m] of renderers(profile)) {
+    const p = peaks.get(pid) || { rss: 0, anon: 0, shmem: 0 };
+    peaks.set(pid, { rss: Math.max(p.rss, m.rss), anon: Math.max(p.anon, m.anon), shmem: Math.max(p.shmem, m.shmem) });
+  }
+}
+function tabPeak() {
+  return [...peaks.values()].reduce((a, b) => (b.rss > a.rss ? b : a), { rss: 0, anon: 0 });
+}
+
+const dir = tempDir('measure');
+console.error(`synthesising a ${size}² bracket in ${dir}`);
+execFileSync(skydomeBin(), ['synth', '-o', dir, '--size', String(size), '--quiet']);
+const frames = readdirSync(dir).filter((f) => /^frame_\d+\.jpg$/.test(f)).sort().map((f) => path.join(dir, f));
+
+const cliArgs = ['merge', ...frames, '--times-file', path.join(dir, 'times.txt'), '--fisheye',
+  '--lens-model', 'stereographic', '--fov', '235', '--crop', '--north', '0', '--sun', 'auto',
+  '--preview', path.join(dir, 'cli.jpg'), '-o', path.join(dir, 'cli.hdr'), '--quiet', '--force'];
+const c0 = performance.now();
+execFileSync(skydomeBin(), cliArgs);
+const cliMs = performance.now() - c0;
+
+const server = await serve();
+const p = await phone(server.origin);
+const sampler = setInterval(() => sample(p.profile), 100);
+try {
+  // The gallery path alone: no camera (its frame buffers and the live lens detection are not
+  // part of a merge; the app stops the camera while merging anyway).
+  await p.page.addInitScript(() => {
+    navigator.mediaDevices.getUserMedia = () => Promise.reject(new DOMException('measuring without a camera', 'NotAllowedError'));
+  });
+  await p.page.goto(`${server.origin}/`);
+  await onScreen(p.page, 'camera');
+  await setSettings(p.page, { fisheye: true, sun: 'auto', north: '0', equirect: false });
+  await p.page.waitForTimeout(1000);
+  sample(p.profile);
+  const baseline = tabPeak();
+  peaks.clear();
+  const cdp = await p.context.newCDPSession(p.page);
+  await cdp.send('Performance.enable');
+  const since = await p.page.evaluate(() => Date.now());
+  const w0 = performance.now();
+  await p.page.setInputFiles('#gallery', [...frames, path.join(dir, 'times.txt')]);
+  const msg = await resultOrError(p.page, since);
+  const wallMs = performance.now() - w0;
+  if (msg) throw new Error(msg);
+  sample(p.profile);
+  const peak = tabPeak();
+  const metrics = Object.fromEntries((await cdp.send('Performance.getMetrics')).metrics.map((m) => [m.name, m.value]));
+  const core = await p.page.evaluate(() => window.__skydomeCoreMs);
+  const wasm = await p.page.evaluate(() => window.__skydomeAsk('memory'));
+  const gz = gzipSync(readFileSync(path.join(appDir, 'pkg/skydome_web_bg.wasm')), { level: 9 }).length;
+  const raw = readFileSync(path.join(appDir, 'pkg/skydome_web_bg.wasm')).length;
+  const result = {
+    frames: frames.length,
+    megapixels_each: (size * size) / 1e6,
+    browser_core_s: core / 1000,
+    browser_wall_s: wallMs / 1000,
+    cli_s: cliMs / 1000,
+    cli_binary: skydomeBin(),
+    tab_peak_rss_mb: peak.rss / 2 ** 20,
+    tab_peak_own_mb: peak.anon / 2 ** 20,
+    tab_peak_shmem_mb: peak.shmem / 2 ** 20,
+    tab_before_rss_mb: baseline.rss / 2 ** 20,
+    tab_before_own_mb: baseline.anon / 2 ** 20,
+    wasm_memory_high_water_mb: wasm.wasmBytes / 2 ** 20,
+    page_js_heap_used_mb: metrics.JSHeapUsedSize / 2 ** 20,
+    wasm_bytes: raw,
+    wasm_gzip_bytes: gz,
+  };
+  console.log(JSON.stringify(result, null, 2));
+  if (outFile) writeFileSync(outFile, JSON.stringify(result, null, 2));
+} finally {
+  clearInterval(sampler);
+  await p.close();
+  server.stop();
+}
