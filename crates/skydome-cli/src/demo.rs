@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
+use skydome::fisheye::LensProfile;
 
 use crate::io::Outputs;
 
@@ -30,154 +31,165 @@ pub struct Args {
 
 /// The top-level entry point for `skydome demo`.
 pub fn run(a: Args, quiet: bool) -> Result<()> {
-    let dir = &a.output;
-    let bracket = dir.join("bracket");
-    std::fs::create_dir_all(&bracket)
-        .with_context(|| format!("{}: cannot create", bracket.display()))?;
-    let mut out = Outputs::default();
-    for (name, bytes) in FILES {
-        out.add(&bracket.join(name), bytes.to_vec());
-    }
-    out.commit(&[], a.force)?;
-    let p = |name: &str| dir.join(name).display().to_string();
-    let b = |name: &str| bracket.join(name).display().to_string();
-    let (f0, f1, f2, times) = (
-        b("frame_0.jpg"),
-        b("frame_1.jpg"),
-        b("frame_2.jpg"),
-        b("times.txt"),
-    );
-    // Every step reads the bundled bracket the same way.
-    let bracket_args = [f0.as_str(), &f1, &f2, "--times-file", &times];
-
-    let step = |args: &[&str]| -> Result<()> {
-        let mut full = vec!["skydome"];
-        full.extend_from_slice(args);
-        // `info` and `compare` write nothing, so they take no --force.
-        if a.force && !matches!(args.first(), Some(&"info" | &"compare")) {
-            full.push("--force");
-        }
-        if quiet {
-            full.push("--quiet");
-        }
-        if !quiet {
-            crate::out(&format!("\n$ {}", full.join(" ")));
-        }
-        crate::run_args(&full)
-    };
-    let with_bracket = |cmd: &str, rest: &[&str]| -> Result<()> {
-        step(&[&[cmd][..], &bracket_args, rest].concat())
-    };
-
-    // 1. The lens: detect the image circle; the bundled bracket was shot through an equidistant 235° lens.
-    let (lens_json, lens_overlay) = (p("lens.json"), p("lens_overlay.png"));
-    step(
-        &[
-            &["lens", "detect"][..],
-            &bracket_args,
-            &[
-                "--model",
-                "equidistant",
-                "--fov",
-                "235",
-                "-o",
-                &lens_json,
-                "--overlay",
-                &lens_overlay,
-            ],
-        ]
-        .concat(),
-    )?;
-    let lens = crate::geometry::read_lens(&dir.join("lens.json"))?;
-    let c = lens.circle;
-    let circle = format!("{:.3},{:.3},{:.3}", c.cx, c.cy, c.r);
-
-    // 2. Calibrate the camera response once, sampling inside the circle. 600 samples: the
-    // bundled sky has few dark pixels (only the ground ring), and with the default 128 the
-    // toe of the curve below code ≈ 90 changes from seed to seed (RMS spread 0.25 ln units
-    // over 5 seeds; 0.035 with 600, below the 0.05 threshold).
-    let camera = p("camera.json");
-    with_bracket(
-        "calibrate",
-        &[
-            "--circle",
-            &circle,
-            "--samples",
-            "600",
-            "--repeat",
-            "5",
-            "-o",
-            &camera,
-            "--plot",
-            &p("response.png"),
-        ],
-    )?;
-
-    // 3. Merge with the profile, crop to the 180° dome, find the sun, mark north, make maps.
-    let (sky, latlong) = (p("sky.hdr"), p("sky_latlong.hdr"));
-    with_bracket(
-        "merge",
-        &[
-            "--profile",
-            &camera,
-            "--lens",
-            &lens_json,
-            "--crop",
-            "--north",
-            "0",
-            "--sun",
-            "auto",
-            "-o",
-            &sky,
-            "--exr",
-            &p("sky.exr"),
-            "--preview",
-            &p("preview.jpg"),
-            "--overlay",
-            &p("overlay.png"),
-            "--equirect",
-            &latlong,
-        ],
-    )?;
-
-    // 4. Accuracy against the ground truth the bracket was rendered from (uncropped merge),
-    // inside the 180° horizon, after one scale per channel (a response is known up to one
-    // constant per channel, so a bracket alone fixes white balance only up to that constant).
-    let full = p("full.hdr");
-    with_bracket("merge", &["--profile", &camera, "-o", &full])?;
-    let horizon = lens.radius_at_deg(90.0).context("lens")?;
-    let dome = format!("{:.3},{:.3},{:.3}", c.cx, c.cy, horizon);
-    step(&[
-        "compare",
-        &full,
-        &b("truth.hdr"),
-        "--per-channel",
-        "--circle",
-        &dome,
-    ])?;
-
-    // 5. Pictures.
-    step(&[
-        "tonemap",
-        &sky,
-        "-o",
-        &p("tonemap_minmax.png"),
-        "--op",
-        "minmax",
-    ])?;
-    step(&["falsecolor", &sky, "-o", &p("falsecolor.png")])?;
-    step(&["histogram", &sky, "-o", &p("histogram.png")])?;
-    step(&["render", &latlong, "-o", &p("spheres.png")])?;
-    step(&["info", &sky])?;
-    if !dir.join("sky.hdr").is_file() {
-        bail!("{}: the demo did not produce sky.hdr", dir.display());
+    let d = Demo::new(&a, quiet)?;
+    let lens = d.lens()?;
+    let camera = d.calibrate(&lens)?;
+    d.merge(&camera)?;
+    d.compare(&camera, &lens)?;
+    d.pictures()?;
+    if !a.output.join("sky.hdr").is_file() {
+        bail!("{}: the demo did not produce sky.hdr", a.output.display());
     }
     if !quiet {
         crate::out(&format!(
             "\ndemo finished: open {} and {}",
-            p("overlay.png"),
-            p("spheres.png")
+            d.out("overlay.png"),
+            d.out("spheres.png")
         ));
     }
     Ok(())
+}
+
+/// The demo's folders and the way it runs each command.
+struct Demo {
+    dir: PathBuf,
+    bracket: PathBuf,
+    force: bool,
+    quiet: bool,
+}
+
+impl Demo {
+    /// Writes the bundled bracket into `DIR/bracket`.
+    fn new(a: &Args, quiet: bool) -> Result<Self> {
+        let bracket = a.output.join("bracket");
+        std::fs::create_dir_all(&bracket)
+            .with_context(|| format!("{}: cannot create", bracket.display()))?;
+        let mut out = Outputs::default();
+        for (name, bytes) in FILES {
+            out.add(&bracket.join(name), bytes.to_vec());
+        }
+        out.commit(&[], a.force)?;
+        Ok(Self {
+            dir: a.output.clone(),
+            bracket,
+            force: a.force,
+            quiet,
+        })
+    }
+
+    /// An output path, as text.
+    fn out(&self, name: &str) -> String {
+        self.dir.join(name).display().to_string()
+    }
+
+    /// A file of the bundled bracket, as text.
+    fn input(&self, name: &str) -> String {
+        self.bracket.join(name).display().to_string()
+    }
+
+    /// Runs one command as a user would type it, printing it first.
+    fn step(&self, args: &[&str]) -> Result<()> {
+        let mut full = vec!["skydome"];
+        full.extend_from_slice(args);
+        // `info` and `compare` write nothing, so they take no --force.
+        if self.force && !matches!(args.first(), Some(&"info" | &"compare")) {
+            full.push("--force");
+        }
+        if self.quiet {
+            full.push("--quiet");
+        } else {
+            crate::out(&format!("\n$ {}", full.join(" ")));
+        }
+        crate::run_args(&full)
+    }
+
+    /// Runs `cmd` on the bundled bracket (every step reads it the same way) with `rest`.
+    fn with_bracket(&self, cmd: &[&str], rest: &[&str]) -> Result<()> {
+        let frames: Vec<String> = (0..3)
+            .map(|i| self.input(&format!("frame_{i}.jpg")))
+            .collect();
+        let times = self.input("times.txt");
+        let bracket = [&frames[0], &frames[1], &frames[2], "--times-file", &times];
+        self.step(&[cmd, &bracket[..], rest].concat())
+    }
+
+    /// Step 1, the lens: detect the image circle; the bundled bracket was shot through an
+    /// equidistant 235° lens.
+    fn lens(&self) -> Result<LensProfile> {
+        let (json, overlay) = (self.out("lens.json"), self.out("lens_overlay.png"));
+        let rest = ["--model", "equidistant", "--fov", "235", "-o", &json];
+        self.with_bracket(
+            &["lens", "detect"],
+            &[&rest[..], &["--overlay", &overlay]].concat(),
+        )?;
+        crate::geometry::read_lens(&self.dir.join("lens.json"))
+    }
+
+    /// Step 2: calibrate the camera response once, sampling inside the circle. 600 samples: the
+    /// bundled sky has few dark pixels (only the ground ring), and with the default 128 the toe
+    /// of the curve below code ≈ 90 changes from seed to seed (RMS spread 0.25 ln units over 5
+    /// seeds; 0.035 with 600, below the 0.05 threshold).
+    fn calibrate(&self, lens: &LensProfile) -> Result<String> {
+        let c = lens.circle;
+        let circle = format!("{:.3},{:.3},{:.3}", c.cx, c.cy, c.r);
+        let (camera, plot) = (self.out("camera.json"), self.out("response.png"));
+        let rest = ["--circle", &circle, "--samples", "600", "--repeat", "5"];
+        self.with_bracket(
+            &["calibrate"],
+            &[&rest[..], &["-o", &camera, "--plot", &plot]].concat(),
+        )?;
+        Ok(camera)
+    }
+
+    /// Step 3: merge with the profile, crop to the 180° dome, find the sun, mark north, make maps.
+    fn merge(&self, camera: &str) -> Result<()> {
+        let lens = self.out("lens.json");
+        let geometry = ["--lens", &lens, "--crop", "--north", "0", "--sun", "auto"];
+        let (sky, exr, latlong) = (
+            self.out("sky.hdr"),
+            self.out("sky.exr"),
+            self.out("sky_latlong.hdr"),
+        );
+        let (preview, overlay) = (self.out("preview.jpg"), self.out("overlay.png"));
+        let outputs = [
+            "-o",
+            &sky,
+            "--exr",
+            &exr,
+            "--preview",
+            &preview,
+            "--overlay",
+            &overlay,
+            "--equirect",
+            &latlong,
+        ];
+        self.with_bracket(
+            &["merge"],
+            &[&["--profile", camera][..], &geometry, &outputs].concat(),
+        )
+    }
+
+    /// Step 4: accuracy against the ground truth the bracket was rendered from (uncropped merge),
+    /// inside the 180° horizon, after one scale per channel (a response is known up to one
+    /// constant per channel, so a bracket alone fixes white balance only up to that constant).
+    fn compare(&self, camera: &str, lens: &LensProfile) -> Result<()> {
+        let full = self.out("full.hdr");
+        self.with_bracket(&["merge"], &["--profile", camera, "-o", &full])?;
+        let c = lens.circle;
+        let horizon = lens.radius_at_deg(90.0).context("lens")?;
+        let dome = format!("{:.3},{:.3},{:.3}", c.cx, c.cy, horizon);
+        let truth = self.input("truth.hdr");
+        self.step(&["compare", &full, &truth, "--per-channel", "--circle", &dome])
+    }
+
+    /// Step 5: pictures.
+    fn pictures(&self) -> Result<()> {
+        let (sky, latlong) = (self.out("sky.hdr"), self.out("sky_latlong.hdr"));
+        let minmax = self.out("tonemap_minmax.png");
+        self.step(&["tonemap", &sky, "-o", &minmax, "--op", "minmax"])?;
+        self.step(&["falsecolor", &sky, "-o", &self.out("falsecolor.png")])?;
+        self.step(&["histogram", &sky, "-o", &self.out("histogram.png")])?;
+        self.step(&["render", &latlong, "-o", &self.out("spheres.png")])?;
+        self.step(&["info", &sky])
+    }
 }
