@@ -226,16 +226,14 @@ impl Outcome {
         .map_err(|e| WebError::Encode(e.to_string()))
     }
 
-    /// The input-photo pixel under output pixel `(x, y)`: the output is the input shifted by
-    /// the crop (the lens circle's centre in the input sits at the horizon's centre in the
-    /// output). Without a lens the two are the same.
+    /// The input-photo pixel under output pixel `(x, y)`, as the library maps it
+    /// ([`skydome::pipeline::GeometryReport::input_pixel`]). Without a lens the two are the
+    /// same.
     pub fn input_pixel(&self, x: f64, y: f64) -> PixelPoint {
+        let p = PixelPoint { x, y };
         match &self.dome.report.geometry {
-            Some(g) => PixelPoint {
-                x: x + g.lens.circle.cx - g.horizon.cx,
-                y: y + g.lens.circle.cy - g.horizon.cy,
-            },
-            None => PixelPoint { x, y },
+            Some(g) => g.input_pixel(p).unwrap_or(p),
+            None => p,
         }
     }
 }

@@ -76,6 +76,14 @@ fn sun_elevation(frames: Vec<DecodedFrame>, level: Option<Level>) -> (f64, f64) 
         ..Options::default()
     };
     let dome = pipeline::run(input, &o, &mut pipeline::no_progress).expect("run");
+    let g = dome.report.geometry.as_ref().expect("geometry");
+    // A levelled dome is resampled: no output pixel is a shifted input pixel any more.
+    assert_eq!(g.levelled, level.is_some());
+    let centre = skydome::image::PixelPoint {
+        x: g.horizon.cx,
+        y: g.horizon.cy,
+    };
+    assert_eq!(g.input_pixel(centre).is_none(), level.is_some());
     let sun = dome
         .meta
         .sun

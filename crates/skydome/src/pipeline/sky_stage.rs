@@ -65,6 +65,9 @@ pub struct GeometryReport {
     pub sun_cross_check: Option<SunCrossCheck>,
     /// North as set from the sun, when asked.
     pub north_from_sun: Option<NorthFromSun>,
+    /// True when the output was resampled to a level dome (a tilt was given): its pixels are
+    /// then no shifted copy of the input's.
+    pub levelled: bool,
     /// Horizontal illuminance of the dome (θ ≤ 90°, cosine-weighted), Radiance's way
     /// ([`sky::radiance_luminance`] of the horizontal irradiance): lux when the radiance is
     /// absolute, relative units otherwise. What `evalglare -V` reports for the upward dome.
@@ -113,6 +116,19 @@ fn north_from_sun(
         compass_error_deg: o.sky.north_deg.map(|_| c.compass_error_deg),
         elevation_error_deg: -c.elevation_error_deg,
     })
+}
+
+impl GeometryReport {
+    /// The input-photo pixel under output pixel `p` (e.g. a tap on the preview, to pass back as
+    /// [`SunMode::Tap`]): the output is the input shifted by the crop, the lens circle's centre
+    /// in the input sitting at the horizon's centre in the output. `None` for a levelled
+    /// (resampled) dome.
+    pub fn input_pixel(&self, p: PixelPoint) -> Option<PixelPoint> {
+        (!self.levelled).then_some(PixelPoint {
+            x: p.x + self.lens.circle.cx - self.horizon.cx,
+            y: p.y + self.lens.circle.cy - self.horizon.cy,
+        })
+    }
 }
 
 /// The sky stage's results.
@@ -264,6 +280,7 @@ pub(super) fn apply(
             sun_ephemeris: ephemeris,
             sun_cross_check: cross,
             north_from_sun: north_fix,
+            levelled: f.resampled_from.is_some(),
             horizontal_illuminance: sky::radiance_luminance(
                 reproject::horizontal_irradiance_fisheye(&f.image, &f.geom),
             ),
