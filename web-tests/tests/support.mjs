@@ -82,7 +82,13 @@ export async function phone(origin, { downloads = true } = {}) {
   const requests = [];
   context.on('request', (r) => requests.push(r.url()));
   const page = context.pages()[0] || (await context.newPage());
-  page.setDefaultTimeout(300000);
+  // One step (a page load, a merge) over two minutes is a hang: fail there, naming the step,
+  // well before the whole file's time limit (package.json) cuts every test short.
+  page.setDefaultTimeout(Number(process.env.SKYDOME_WEB_STEP_MS || 120000));
+  if (process.env.SKYDOME_WEB_DEBUG) {
+    page.on('console', (m) => console.log('[console]', m.text()));
+    context.on('requestfailed', (r) => console.log('[failed]', r.url(), r.failure() && r.failure().errorText));
+  }
   const errors = [];
   page.on('pageerror', (e) => errors.push(String(e)));
   return {
