@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use skydome::fisheye::{LensKind, LensProfile};
 use skydome::formats::PixelPoint;
 use skydome::image::Circle;
-use skydome::pipeline::{EquirectOptions, LensSource, Products, SkyOptions, SunMode};
+use skydome::pipeline::{EquirectOptions, LensSource, Products, SkyOptions, SunDisc, SunMode};
 use skydome::reproject::Ground;
 use skydome::sky::{DevicePose, Level};
 
@@ -63,6 +63,12 @@ pub struct GeometryArgs {
     /// or `X,Y` (a pixel of the input photos, origin top-left).
     #[arg(long, default_value = "auto", value_parser = parse_sun)]
     pub sun: SunMode,
+    /// A sun clipped even in the shortest frame: `reconstruct` replaces it by the solar disc
+    /// whose luminance makes the direct light right (from --illuminance with --luminance, else
+    /// the IES clear-sky model, ±25 %), marked `#SUN_DISC=` in the header; `keep` leaves the
+    /// clipped values (a lower bound).
+    #[arg(long, default_value = "reconstruct", value_parser = parse_sun_disc)]
+    pub sun_disc: SunDisc,
     /// Capture time for the ephemeris, ISO 8601 with offset (default: EXIF DateTimeOriginal + OffsetTime).
     #[arg(long, value_name = "ISO8601")]
     pub time: Option<String>,
@@ -123,6 +129,11 @@ fn parse_north(s: &str) -> Result<North, String> {
 
 /// Parses `screen-down` or `screen-up`.
 pub fn parse_pose(s: &str) -> Result<DevicePose, String> {
+    s.parse().map_err(|e: skydome::UnknownName| e.to_string())
+}
+
+/// Parses `reconstruct` or `keep`.
+pub fn parse_sun_disc(s: &str) -> Result<SunDisc, String> {
     s.parse().map_err(|e: skydome::UnknownName| e.to_string())
 }
 
@@ -233,6 +244,7 @@ impl GeometryArgs {
             time: self.time.clone(),
             latitude_deg: self.lat,
             longitude_deg: self.lon,
+            sun_disc: self.sun_disc,
         }
     }
 

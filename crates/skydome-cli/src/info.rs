@@ -37,6 +37,11 @@ struct Info {
     /// log2(p99.9 / p0.1) of positive luminance, in stops (robust to single pixels; percentiles
     /// resolved to 1/32 stop).
     dynamic_range_stops_robust: Option<f64>,
+    /// True when the header marks the values absolute (`#UNITS= absolute`, Radiance's
+    /// W·sr⁻¹·m⁻²).
+    absolute: bool,
+    /// Luminance `179 × (0.265 R + 0.670 G + 0.065 B)` of the pixels, cd/m² when `absolute`.
+    luminance: Option<skydome::photometry::LuminanceSummary>,
 }
 
 /// The top-level entry point for `skydome info`.
@@ -56,6 +61,8 @@ pub fn run(a: Args) -> Result<()> {
         )
     };
     let invalid = st.invalid_pixels as usize;
+    let absolute = r.meta.is_absolute();
+    let luminance = skydome::photometry::luminance_summary(img);
     let info = Info {
         file: a.file.display().to_string(),
         format: r.format,
@@ -70,6 +77,8 @@ pub fn run(a: Args) -> Result<()> {
         zero_pixels: lum.zero_count as usize,
         dynamic_range_stops: dr,
         dynamic_range_stops_robust: dr_robust,
+        absolute,
+        luminance,
     };
     if a.json {
         crate::out(&serde_json::to_string_pretty(&info)?);
@@ -91,6 +100,13 @@ pub fn run(a: Args) -> Result<()> {
             s += &format!("dynamic range {d:.1} stops (robust, 0.1–99.9 %: {r:.1} stops)\n")
         }
         _ => s += "dynamic range: no pixel with positive luminance\n",
+    }
+    if let Some(l) = &info.luminance {
+        let unit = if absolute { "cd/m²" } else { "relative" };
+        s += &format!(
+            "luminance ({unit}): median {:.4e}, p99 {:.4e}, max {:.4e}, mean {:.4e}\n",
+            l.median, l.p99, l.max, l.mean
+        );
     }
     if invalid > 0 {
         s += &format!("{invalid} pixels are NaN, infinite or negative\n");

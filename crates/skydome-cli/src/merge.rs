@@ -257,6 +257,18 @@ fn print_summary(r: &Report, written: &[String]) {
         if let Some(n) = g.north {
             crate::out(&format!("north point at ({:.1}, {:.1})", n.x, n.y));
         }
+        if let Some(d) = &g.sun_disc {
+            let unit = |u: &'static str| if d.absolute { u } else { " (relative)" };
+            crate::out(&format!(
+                "sun clipped in every frame: a solar disc of {:.4e}{} put in ({} px), direct normal {:.4e}{}, from {}",
+                d.luminance,
+                unit(" cd/m²"),
+                d.pixels,
+                d.direct_normal,
+                unit(" lx"),
+                d.from.describe()
+            ));
+        }
         if let Some(f) = g.north_from_sun {
             crate::out(&format!(
                 "north from the sun: the phone's top edge pointed at {:.2}°{}",
@@ -276,7 +288,13 @@ fn print_summary(r: &Report, written: &[String]) {
             s += &format!("; horizontal illuminance {e:.0} lx");
         }
         if let Some(d) = p.disagreement_percent {
-            s += &format!("; the illuminance reading disagrees by {d:+.1} %");
+            let rebuilt = r
+                .geometry
+                .as_ref()
+                .and_then(|g| g.sun_disc)
+                .is_some_and(|d| d.from == skydome::sun_disc::DirectSource::MeasuredIlluminance);
+            let when = if rebuilt { " before the sun disc" } else { "" };
+            s += &format!("; the illuminance reading disagreed by {d:+.1} %{when}");
         }
         crate::out(&s);
     }

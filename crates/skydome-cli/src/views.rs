@@ -18,7 +18,9 @@ pub struct FalsecolorArgs {
     /// The PNG to write.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Absolute calibration: cd/m² per relative unit (labels the bar in cd/m²).
+    /// Absolute calibration: cd/m² per unit of the file's luminance (labels the bar in cd/m²).
+    /// Default: 179 for a file marked `#UNITS= absolute` (Radiance's luminous efficacy, as
+    /// `merge --luminance/--illuminance` writes), else relative units.
     #[arg(long)]
     pub scale: Option<f64>,
     /// Colour-bar range LOW,HIGH in the bar's units (default: 1st–99.9th percentiles).
@@ -92,12 +94,17 @@ pub fn falsecolor(a: FalsecolorArgs, quiet: bool) -> Result<()> {
         },
         None => None,
     };
-    let img = crate::radiance::read(&a.input)?.image;
+    let file = crate::radiance::read(&a.input)?;
+    let absolute = file
+        .meta
+        .is_absolute()
+        .then_some(skydome::sky::RADIANCE_EFFICACY);
+    let img = file.image;
     let fc = plot::false_colour(
         &img,
         &FalseColour {
             mask: a.circle,
-            scale: a.scale,
+            scale: a.scale.or(absolute),
             range,
             ..FalseColour::default()
         },

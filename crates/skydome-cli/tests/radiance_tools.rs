@@ -165,7 +165,8 @@ fn absolute_calibration_from_illuminance_and_spot_luminance() {
 
     // Spot luminance: the patch reads what the meter read. A lux meter on the same (true)
     // scale sees the sun, which is clipped in every frame of this bracket (it holds about half
-    // the truth's light): the dome then falls far short of the reading, and that is reported.
+    // the truth's light): kept clipped, the dome falls far short of the reading, and that is
+    // reported; rebuilt (the default), the disc makes up the difference.
     let spot_arg = format!("230.5,110.5={cd}");
     let geom = demo_geometry(&truth.image);
     let lux_of = |img: &skydome::HdrImage| {
@@ -179,7 +180,7 @@ fn absolute_calibration_from_illuminance_and_spot_luminance() {
     let mut sunless = truth.image.clone();
     sunless.data.iter_mut().for_each(|v| *v = v.min(20.0));
     let lux_sunless = lux_of(&sunless);
-    let run = |name: &str, lux: f64| {
+    let run = |name: &str, lux: f64, disc: &str| {
         let lux = lux.to_string();
         let args = [
             "--luminance",
@@ -188,26 +189,65 @@ fn absolute_calibration_from_illuminance_and_spot_luminance() {
             "4",
             "--illuminance",
             &lux,
+            "--sun-disc",
+            disc,
         ];
         merge_demo(dir.path(), name, &args)
     };
-    let both = run("both", lux_sunless);
+    let both = run("both", lux_sunless, "reconstruct");
     let p = &both["photometry"];
     assert_eq!(p["from"], "luminance");
     assert!((p["patch_luminance_cd_m2"].as_f64().unwrap() / cd - 1.0).abs() < 1e-6);
     let d = p["disagreement_percent"].as_f64().unwrap();
     assert!(d.abs() < 5.0, "consistent readings disagree by {d} %");
-    let with_sun = run("sun", lux_true);
-    let d_sun = with_sun["photometry"]["disagreement_percent"]
+    let warned = |r: &serde_json::Value| {
+        r["warnings"].as_array().unwrap().iter().any(|w| {
+            w.as_str()
+                .is_some_and(|w| w.contains("illuminance reading"))
+        })
+    };
+    let kept = run("kept", lux_true, "keep");
+    let d_sun = kept["photometry"]["disagreement_percent"].as_f64().unwrap();
+    assert!(d_sun < -30.0, "{d_sun}");
+    assert!(warned(&kept), "{}", kept["warnings"]);
+    assert!(kept["geometry"]["sun_disc"].is_null());
+    assert!(!warned(&both), "{}", both["warnings"]);
+
+    let rebuilt = run("sun", lux_true, "reconstruct");
+    let disc = &rebuilt["geometry"]["sun_disc"];
+    assert_eq!(disc["from"], "measured_illuminance", "{rebuilt}");
+    assert!(!warned(&rebuilt), "{}", rebuilt["warnings"]);
+    let ours = rebuilt["geometry"]["horizontal_illuminance"]
         .as_f64()
         .unwrap();
-    assert!(d_sun < -30.0, "{d_sun}");
-    let warned = with_sun["warnings"].as_array().unwrap().iter().any(|w| {
-        w.as_str()
-            .is_some_and(|w| w.contains("illuminance reading"))
-    });
-    assert!(warned, "{}", with_sun["warnings"]);
-    assert!(!both["warnings"].to_string().contains("illuminance reading"));
+    assert!((ours / lux_true - 1.0).abs() < 1e-3, "{ours} vs {lux_true}");
+    let head = std::fs::read(dir.path().join("sun.hdr")).unwrap();
+    let head = String::from_utf8_lossy(&head[..1500]);
+    assert!(head.contains("#SUN_DISC= reconstructed"), "{head}");
+    // `info` reads the units back and gives the luminance in cd/m², the sun's included.
+    let o = Command::new(BIN)
+        .args(["info", "--json"])
+        .arg(dir.path().join("sun.hdr"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(info["absolute"], true);
+    let max = info["luminance"]["max"].as_f64().unwrap();
+    let disc_l = disc["luminance"].as_f64().unwrap();
+    // The brightest pixel is the disc's, diluted by its coverage of that pixel.
+    assert!(
+        max > 0.1 * disc_l && max <= disc_l * 1.001,
+        "{max} vs {disc_l}"
+    );
+    // Radiance sees the rebuilt sun in the angular map too.
+    if let Some((bin, lib)) = radiance() {
+        let theirs = evalglare_v(&bin, &lib, &dir.path().join("sun_vta.hdr"));
+        assert!(
+            (theirs / lux_true - 1.0).abs() < 0.02,
+            "evalglare {theirs} vs {lux_true}"
+        );
+    }
 }
 
 /// The demo's lens: equidistant 235° around circle.txt's circle, north at the top.

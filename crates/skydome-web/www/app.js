@@ -265,6 +265,16 @@ function showFacts(result) {
     if (g.sun_ephemeris) {
       facts.push(['Sun (ephemeris)', `azimuth ${fmt(g.sun_ephemeris.azimuth_deg, 2)}°, elevation ${fmt(g.sun_ephemeris.elevation_deg, 2)}°`]);
     }
+    if (g.sun_disc) {
+      // The core's reasons, in this page's words (skydome::sun_disc::DirectSource).
+      const from = {
+        measured_illuminance: 'the measured illuminance',
+        model_direct_normal: 'the IES clear-sky model (±25 %)',
+        model_ratio: 'the IES clear-sky model\'s direct/diffuse ratio (±25 %)',
+      }[g.sun_disc.from] || g.sun_disc.from;
+      const unit = g.sun_disc.absolute ? ' cd/m²' : ' (relative units)';
+      facts.push(['Sun disc', `clipped in every photo: rebuilt at ${g.sun_disc.luminance.toExponential(2)}${unit} from ${from}`]);
+    }
     if (g.sun_cross_check) {
       facts.push(['Cross-check', `${fmt(g.sun_cross_check.angle_deg, 2)}° apart; a compass error of ${fmt(g.sun_cross_check.compass_error_deg, 1)}° would explain it`]);
     }

@@ -63,6 +63,7 @@ pub mod reproject;
 pub mod response;
 pub mod sampling;
 pub mod sky;
+pub mod sun_disc;
 pub mod synth;
 pub mod tonemap;
 

@@ -177,6 +177,52 @@ pub fn absolute_scale(
     })
 }
 
+/// Radiance-luminance statistics of an image ([`radiance_luminance`] of every pixel with a
+/// finite, non-negative value): cd/m² for an absolute map.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LuminanceSummary {
+    /// Smallest.
+    pub min: f64,
+    /// Median.
+    pub median: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Largest.
+    pub max: f64,
+    /// Mean.
+    pub mean: f64,
+}
+
+/// [`LuminanceSummary`] of `img`; `None` when no pixel has a valid value.
+pub fn luminance_summary(img: &HdrImage) -> Option<LuminanceSummary> {
+    let mut l: Vec<f64> = img
+        .pixels()
+        .map(|p| radiance_luminance(p.map(f64::from)))
+        .filter(|v| v.is_finite() && *v >= 0.0)
+        .collect();
+    if l.is_empty() {
+        return None;
+    }
+    let n = l.len();
+    let mean = l.iter().sum::<f64>() / n as f64;
+    let (mut min, mut max) = (f64::INFINITY, 0.0f64);
+    for &v in &l {
+        min = min.min(v);
+        max = max.max(v);
+    }
+    let median = *l.select_nth_unstable_by(n / 2, f64::total_cmp).1;
+    let p99 = *l
+        .select_nth_unstable_by((n * 99 / 100).min(n - 1), f64::total_cmp)
+        .1;
+    Some(LuminanceSummary {
+        min,
+        median,
+        p99,
+        max,
+        mean,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -217,6 +263,16 @@ mod tests {
             patch_luminance(&img(), &off),
             Err(PhotometryError::PatchOutside { .. })
         ));
+    }
+
+    #[test]
+    fn summary_of_radiance_luminance() {
+        let s = luminance_summary(&img()).unwrap();
+        assert!((s.min - 179.0).abs() < 1e-9 && (s.max - 179.0 * 100.0).abs() < 1e-6);
+        assert!((s.median - 179.0 * 51.0).abs() < 1e-6, "{s:?}");
+        assert!((s.p99 - 179.0 * 100.0).abs() < 1e-6, "{s:?}");
+        assert!((s.mean - 179.0 * 50.5).abs() < 1e-6, "{s:?}");
+        assert!(luminance_summary(&HdrImage::new(0, 0)).is_none());
     }
 
     #[test]

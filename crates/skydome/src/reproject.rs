@@ -636,21 +636,7 @@ pub fn horizontal_irradiance_fisheye(img: &HdrImage, geom: &SkyGeometry) -> [f64
     let proj = *geom.projection();
     let (cx, cy) = geom.centre();
     let r90 = proj.radius(std::f64::consts::FRAC_PI_2);
-    let d0 = proj.derivative(0.0);
-    let limit = proj.theta_limit();
-    let weight = |dx: f64, dy: f64| -> f64 {
-        let rho = dx.hypot(dy);
-        if rho > r90 {
-            return 0.0;
-        }
-        if rho < 1e-9 {
-            return 1.0 / (d0 * d0);
-        }
-        match proj.theta_within(rho, limit) {
-            Some(t) => t.cos() * t.sin() / (rho * proj.derivative(t)),
-            None => 0.0,
-        }
-    };
+    let weight = |dx: f64, dy: f64| horizontal_weight(&proj, dx.hypot(dy));
     let y0 = (cy - r90 - 1.0).floor().max(0.0) as usize;
     let y1 = ((cy + r90 + 1.0).ceil().max(0.0) as usize).min(img.height);
     let x0 = (cx - r90 - 1.0).floor().max(0.0) as usize;
@@ -695,6 +681,24 @@ pub fn horizontal_irradiance_fisheye(img: &HdrImage, geom: &SkyGeometry) -> [f64
     let rows: Vec<[f64; 3]> = (y0..y1).map(row_sum).collect();
     rows.iter()
         .fold([0.0; 3], |a, r| [a[0] + r[0], a[1] + r[1], a[2] + r[2]])
+}
+
+/// The horizontal weight `cos θ · dω / dA` of a fish-eye pixel whose centre lies `rho` pixels
+/// from the optical centre: the solid angle of one pixel (sr per pixel², for a radially
+/// symmetric projection `sin θ / (ρ · r′(θ))`) times the cosine of its zenith angle θ (the
+/// optical axis taken as the zenith). 0 below the horizon and beyond the lens.
+pub fn horizontal_weight(proj: &Projection, rho: f64) -> f64 {
+    if rho > proj.radius(std::f64::consts::FRAC_PI_2) {
+        return 0.0;
+    }
+    if rho < 1e-9 {
+        let d0 = proj.derivative(0.0);
+        return 1.0 / (d0 * d0);
+    }
+    match proj.theta_within(rho, proj.theta_limit()) {
+        Some(t) => t.cos() * t.sin() / (rho * proj.derivative(t)),
+        None => 0.0,
+    }
 }
 
 /// Horizontal irradiance of a full-sphere equirectangular map (`width × height`, zenith on the

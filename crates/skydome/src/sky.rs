@@ -748,15 +748,26 @@ pub fn detect_sun_luma(
     };
     let runner_up = comps.get(1).map_or(0.0, |c| c.0);
 
-    let (mut sx, mut sy, mut sw) = (0.0f64, 0.0f64, 0.0f64);
-    for &i in members {
-        let (x, y) = (i % bw, i / bw);
-        let w = f64::from((raw(x, y) - background).max(0.0)) + 1e-12;
-        sx += w * (x as f64 + 0.5);
-        sy += w * (y as f64 + 0.5);
-        sw += w;
-    }
-    let (mx, my) = (sx / sw, sy / sw);
+    // Shape is judged around the blob's centroid; the sun's centre is the centroid of its core
+    // (raw values within the top tenth of the blob's range): the sky's gradient and glare skew
+    // the aureole around a clipped sun, not its saturated core.
+    let core = members
+        .iter()
+        .map(|&i| raw(i % bw, i / bw))
+        .fold(background, f32::max);
+    let centroid = |floor: f32| {
+        let (mut sx, mut sy, mut sw) = (0.0f64, 0.0f64, 0.0f64);
+        for &i in members {
+            let (x, y) = (i % bw, i / bw);
+            let w = f64::from((raw(x, y) - floor).max(0.0)) + 1e-12;
+            sx += w * (x as f64 + 0.5);
+            sy += w * (y as f64 + 0.5);
+            sw += w;
+        }
+        (sx / sw, sy / sw)
+    };
+    let (mx, my) = centroid(background);
+    let (sun_x, sun_y) = centroid(background + 0.9 * (core - background));
     let rmax = members
         .iter()
         .map(|&i| ((i % bw) as f64 + 0.5 - mx).hypot((i / bw) as f64 + 0.5 - my))
@@ -774,8 +785,8 @@ pub fn detect_sun_luma(
     }
     Ok(Some(SunDetection {
         pixel: PixelPoint {
-            x: x0 as f64 + mx,
-            y: y0 as f64 + my,
+            x: x0 as f64 + sun_x,
+            y: y0 as f64 + sun_y,
         },
         confidence,
         area_px: members.len(),

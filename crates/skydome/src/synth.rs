@@ -232,6 +232,28 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthBracket, SynthError> {
         r: 0.48 * w.min(h) as f64,
     });
     let truth = scene(w, h, opts.seed, circle);
+    let frames = photograph(&truth, opts)?;
+    Ok(SynthBracket {
+        truth,
+        frames,
+        true_g: opts.crf.map(|c| c.g_with_black(opts.black_level)),
+        circle,
+        exposure_scale: 0.25 / opts.base_time_s,
+    })
+}
+
+/// Photographs a radiance map `truth` with the simulated camera of `opts` (its size, exposures,
+/// sensor noise, responses, black level and JPEG quality; `truth` replaces the built-in scene,
+/// whose `width`/`height` are ignored): radiance `L` collects `X = L · Δt · k` of the full well,
+/// `k = 0.25 / base_time_s`, so `L = 4` fills it at the base time. Scale `truth` first to
+/// place the scene in the bracket. Frames come shortest exposure first.
+pub fn photograph(truth: &HdrImage, opts: &SynthOptions) -> Result<Vec<Frame>, SynthError> {
+    check(&SynthOptions {
+        width: truth.width.clamp(16, 16384),
+        height: truth.height.clamp(16, 16384),
+        ..opts.clone()
+    })?;
+    let (w, h) = (truth.width, truth.height);
     let k = 0.25 / opts.base_time_s;
     let mut evs = opts.evs.clone();
     evs.sort_by(f64::total_cmp);
@@ -270,13 +292,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthBracket, SynthError> {
             },
         });
     }
-    Ok(SynthBracket {
-        truth,
-        frames,
-        true_g: opts.crf.map(|c| c.g_with_black(opts.black_level)),
-        circle,
-        exposure_scale: k,
-    })
+    Ok(frames)
 }
 
 /// JPEG-encodes 8-bit RGB at quality `q` and decodes it again.

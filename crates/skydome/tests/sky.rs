@@ -431,8 +431,8 @@ fn sun_found_on_the_real_alpnach_frames_and_overlay_written() {
         .circle;
     // The short frames 03–04 show only the sun disc, centred at ≈ (83.5, 81.3) (upper left).
     // Up to frame 08 the clipped disc stays centred; from frame 09 glare and a lens ghost towards
-    // the upper left pull the centroid a few pixels.
-    for (i, tol, min_conf) in [(4, 0.5, 0.5), (6, 1.0, 0.5), (8, 2.0, 0.3), (9, 7.0, 0.15)] {
+    // the upper left pull the blob's centroid several pixels, its saturated core's about two.
+    for (i, tol, min_conf) in [(4, 0.5, 0.5), (6, 1.0, 0.5), (8, 1.0, 0.3), (9, 2.5, 0.15)] {
         let frame = load_rgb8(&alpnach_frame(&dir, i));
         let det = detect_sun_u8(&frame, &circle).expect("the sun is visible in the mid frames");
         let off = (det.pixel.x - 83.5).hypot(det.pixel.y - 81.3);

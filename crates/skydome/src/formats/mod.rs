@@ -49,6 +49,20 @@ pub struct HdrMeta {
     pub other: Vec<String>,
 }
 
+/// The header comment that marks absolute radiance (Radiance's W·sr⁻¹·m⁻²), as
+/// [`crate::pipeline`] writes it after a luminance or illuminance reading.
+pub const ABSOLUTE_UNITS_LINE: &str = "#UNITS= absolute";
+
+impl HdrMeta {
+    /// True when the header says the values are absolute Radiance units (an
+    /// [`ABSOLUTE_UNITS_LINE`]): luminance is then `179 × (0.265 R + 0.670 G + 0.065 B)` cd/m².
+    pub fn is_absolute(&self) -> bool {
+        self.other
+            .iter()
+            .any(|l| l.starts_with(ABSOLUTE_UNITS_LINE))
+    }
+}
+
 /// A radiance-map file format skydome writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RadianceFormat {

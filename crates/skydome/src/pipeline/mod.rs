@@ -222,7 +222,24 @@ pub struct SkyOptions {
     pub latitude_deg: Option<f64>,
     /// Longitude in degrees, east positive; default: EXIF GPS.
     pub longitude_deg: Option<f64>,
+    /// What to do with a sun that clipped even in the shortest exposure (see
+    /// [`crate::sun_disc`]).
+    pub sun_disc: SunDisc,
 }
+
+/// What to do with a sun that clipped even in the shortest exposure.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SunDisc {
+    /// Replace the clipped disc by the solar disc whose luminance makes the direct part right
+    /// (from the illuminance reading, else the clear-sky model), and say so in the header.
+    #[default]
+    Reconstruct,
+    /// Keep the clipped values (a lower bound).
+    Keep,
+}
+
+crate::named_enum!(SunDisc, "sun disc", [Reconstruct => "reconstruct", Keep => "keep"]);
 
 impl Default for SkyOptions {
     fn default() -> Self {
@@ -237,6 +254,7 @@ impl Default for SkyOptions {
             time: None,
             latitude_deg: None,
             longitude_deg: None,
+            sun_disc: SunDisc::Reconstruct,
         }
     }
 }
@@ -559,20 +577,32 @@ pub fn run(
             fisheye::devignette(&mut radiance, l, v);
         }
     }
-    let photometry = calibrate_absolute(options, &br, lens.as_ref().map(|l| &l.0), &mut radiance)?;
-    if let Some(p) = &photometry {
-        meta.other.push(absolute_header_line(p));
-        if let Some(d) = p.disagreement_percent.filter(|d| d.abs() > 10.0) {
-            warnings.push(format!(
-                "the dome's horizontal illuminance is {d:+.0} % off the illuminance reading (after the luminance reading's scale): a clipped sun, vignetting or a meter that saw a different sky"
-            ));
-        }
-    }
+    let mut photometry =
+        calibrate_absolute(options, &br, lens.as_ref().map(|l| &l.0), &mut radiance)?;
     let (mut geometry, mut equirect, mut angular, mut marks) = (None, None, None, None);
     let lens_profile = lens.as_ref().map(|(l, _)| l.clone());
+    let mut sun_from_reading = false;
     if let Some(lens) = lens {
         p.at(Stage::Sky, 0.0)?;
-        let g = sky_stage::apply(options, &br, lens, radiance)?;
+        let facts = sky_stage::MergeFacts {
+            clipped: merged.clipped.as_deref(),
+            photometry: photometry.as_ref(),
+        };
+        let g = sky_stage::apply(options, &br, lens, radiance, facts)?;
+        if let Some(d) = &g.report.sun_disc {
+            if let Some(p) = photometry.as_mut() {
+                p.scale *= g.rescale;
+                p.patch_luminance_cd_m2 = p.patch_luminance_cd_m2.map(|l| l * g.rescale);
+                p.horizontal_illuminance_lux = Some(g.report.horizontal_illuminance);
+            }
+            sun_from_reading = d.from == crate::sun_disc::DirectSource::MeasuredIlluminance;
+        }
+        if let Some(p) = &photometry {
+            meta.other.push(absolute_header_line(p));
+        }
+        if let Some(d) = &g.report.sun_disc {
+            meta.other.push(d.header_line());
+        }
         radiance = g.image;
         meta.sun = g.meta.sun;
         meta.north = g.meta.north;
@@ -591,6 +621,17 @@ pub fn run(
         warnings.extend(g.warnings);
         geometry = Some(g.report);
         p.at(Stage::Sky, 1.0)?;
+    } else if let Some(p) = &photometry {
+        meta.other.push(absolute_header_line(p));
+    }
+    if let Some(p) = &photometry {
+        // A sun rebuilt from the illuminance reading is what the disagreement was.
+        let d = p.disagreement_percent.filter(|d| d.abs() > 10.0);
+        if let Some(d) = d.filter(|_| !sun_from_reading) {
+            warnings.push(format!(
+                "the dome's horizontal illuminance is {d:+.0} % off the illuminance reading (after the luminance reading's scale): a clipped sun, vignetting or a meter that saw a different sky"
+            ));
+        }
     }
 
     p.at(Stage::Pictures, 0.0)?;
@@ -714,7 +755,8 @@ fn calibrate_absolute(
 /// The header comment that states the units of an absolute dome.
 fn absolute_header_line(p: &crate::photometry::PhotometryReport) -> String {
     let mut s = format!(
-        "#UNITS= absolute: Radiance W/sr/m2, luminance = 179*(0.265 R + 0.670 G + 0.065 B) cd/m2; scaled by {} from the {} reading",
+        "{}: Radiance W/sr/m2, luminance = 179*(0.265 R + 0.670 G + 0.065 B) cd/m2; scaled by {} from the {} reading",
+        crate::formats::ABSOLUTE_UNITS_LINE,
         crate::image::fmt_num(p.scale),
         p.from
     );

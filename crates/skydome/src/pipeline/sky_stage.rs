@@ -4,15 +4,17 @@
 use serde::Serialize;
 use time::OffsetDateTime;
 
-use super::{default_equirect_width, Options, PipelineError, SunMode};
+use super::{default_equirect_width, Options, PipelineError, SunDisc, SunMode};
 use crate::bracket::Bracket;
 use crate::fisheye::LensKind;
 use crate::fisheye::{self, CircleFit, LensProfile};
 use crate::formats::{HdrMeta, PixelPoint, SunMark};
 use crate::image::{Circle, HdrImage};
 use crate::overlay::OverlayMarks;
+use crate::photometry::PhotometryReport;
 use crate::reproject::{self, MapProjection, ReprojectOptions};
 use crate::sky::{self, DevicePose, Direction, ImageOrientation, Site, SkyGeometry, SunCrossCheck};
+use crate::sun_disc::{self, DirectSource, SunDiscReport};
 
 /// A detected sun further than this from the computed one is reported as a warning (degrees):
 /// beyond a few solar diameters, and about what a phone compass near a magnet errs by.
@@ -72,6 +74,9 @@ pub struct GeometryReport {
     /// ([`sky::radiance_luminance`] of the horizontal irradiance): lux when the radiance is
     /// absolute, relative units otherwise. What `evalglare -V` reports for the upward dome.
     pub horizontal_illuminance: f64,
+    /// The solar disc put back in place of a sun clipped in every frame (see
+    /// [`crate::sun_disc`]); `None` when the sun was not clipped, not found, or kept.
+    pub sun_disc: Option<SunDiscReport>,
 }
 
 /// North set from the observed sun and the ephemeris (a clip-on lens with a magnet biases the
@@ -140,6 +145,9 @@ pub(super) struct SkyResult {
     pub marks: OverlayMarks,
     pub report: GeometryReport,
     pub warnings: Vec<String>,
+    /// The factor the whole dome was scaled by to make room for a reconstructed sun within an
+    /// illuminance reading that set the scale alone (1 otherwise).
+    pub rescale: f64,
 }
 
 /// The geometry of the (possibly cropped) output and where input pixels land in it.
@@ -169,6 +177,30 @@ impl Framed {
             }),
         }
     }
+
+    /// The input-photo pixel position under an output pixel position (the inverse of
+    /// [`Framed::shift`]).
+    fn unshift(&self, p: PixelPoint) -> Option<PixelPoint> {
+        match &self.resampled_from {
+            Some(src) => {
+                let v = self.geom.pixel_to_vector(p.x, p.y)?;
+                let (x, y) = src.vector_to_pixel(v)?;
+                Some(PixelPoint { x, y })
+            }
+            None => Some(PixelPoint {
+                x: p.x + self.offset.0,
+                y: p.y + self.offset.1,
+            }),
+        }
+    }
+}
+
+/// What the sky stage needs of the merge besides the radiance.
+pub(super) struct MergeFacts<'a> {
+    /// Per input pixel flags of [`crate::merge`] (`CLIPPED_HIGH` …), when computed.
+    pub clipped: Option<&'a [u8]>,
+    /// The absolute calibration, when one was made.
+    pub photometry: Option<&'a PhotometryReport>,
 }
 
 /// Runs the sky stage on `radiance` (the merged, uncropped photo).
@@ -177,6 +209,7 @@ pub(super) fn apply(
     br: &Bracket,
     (lens, detected): (LensProfile, Option<CircleFit>),
     radiance: HdrImage,
+    facts: MergeFacts<'_>,
 ) -> Result<SkyResult, PipelineError> {
     let north_fix = match o.sky.north_from_sun {
         true => Some(north_from_sun(o, br, &lens, &radiance)?),
@@ -194,7 +227,7 @@ pub(super) fn apply(
     };
     let s = &o.sky;
     let full = full_geometry(o, br, &lens)?;
-    let f = match (s.level.is_some(), s.crop) {
+    let mut f = match (s.level.is_some(), s.crop) {
         (true, true) => level_dome(&radiance, &lens, full, s.fov_out_deg)?,
         _ => frame(radiance, &lens, full, s.crop.then_some(s.fov_out_deg))?,
     };
@@ -216,6 +249,29 @@ pub(super) fn apply(
             c.angle_deg, c.compass_error_deg
         ));
     }
+    let mut rescale = 1.0;
+    let disc = match (s.sun_disc, &sun_dir, facts.clipped) {
+        (SunDisc::Reconstruct, Some(d), Some(mask)) => {
+            match reconstruct_sun(
+                o,
+                &mut f,
+                d,
+                (mask, br.width(), br.height()),
+                facts.photometry,
+            ) {
+                Some(Ok((r, k))) => {
+                    rescale = k;
+                    Some(r)
+                }
+                Some(Err(w)) => {
+                    warnings.push(w);
+                    None
+                }
+                None => None,
+            }
+        }
+        _ => None,
+    };
     // An azimuth means something only when north is known, or the position came from it.
     let azimuth_known = s.north_deg.is_some() || source == Some(SunSource::Ephemeris);
     let sun = sun_px.map(|pixel| SunMark {
@@ -284,10 +340,93 @@ pub(super) fn apply(
             horizontal_illuminance: sky::radiance_luminance(
                 reproject::horizontal_irradiance_fisheye(&f.image, &f.geom),
             ),
+            sun_disc: disc,
         },
         image: f.image,
         warnings,
+        rescale,
     })
+}
+
+/// Puts the solar disc back when the sun at `sun` clipped in every frame (`mask`: the merge's
+/// per-pixel flags of the `width × height` input photos). `None`: nothing to do (the sun did
+/// not clip, or it is at or below the horizon, or the dome is not level); `Some(Err)`: a
+/// warning why the clipped sun was kept; `Some(Ok)`: the report and the factor the dome was
+/// rescaled by (see [`SkyResult::rescale`]).
+fn reconstruct_sun(
+    o: &Options,
+    f: &mut Framed,
+    sun: &Direction,
+    (mask, width, height): (&[u8], usize, usize),
+    photometry: Option<&PhotometryReport>,
+) -> Option<Result<(SunDiscReport, f64), String>> {
+    // The illuminance integral takes the optical axis as the zenith: true unless a tilt was
+    // given without the crop that levels the dome.
+    let level = o.sky.level.is_none() || f.resampled_from.is_some();
+    if sun.elevation_deg <= 0.5 || !level {
+        return None;
+    }
+    let at = f.geom.direction_to_pixel(sun)?;
+    let input_at = f.unshift(at)?;
+    // Clipped pixels within half a degree of the sun's centre in the input photos.
+    let proj = f.geom.projection();
+    let px_per_rad = proj.derivative((90.0 - sun.elevation_deg).to_radians());
+    let radius = (0.5f64.to_radians() * px_per_rad).max(1.5);
+    if !sun_disc::clipped_near(mask, width, height, input_at, radius) {
+        return None;
+    }
+    let disc = sun_disc::disc_pixels(&f.geom, f.image.width, f.image.height, sun);
+    if disc.is_empty() {
+        return None;
+    }
+    let total =
+        sky::radiance_luminance(reproject::horizontal_irradiance_fisheye(&f.image, &f.geom));
+    let mut diffuse = total - sun_disc::disc_illuminance(&f.image, &disc);
+    let el = sun.elevation_deg;
+    let sin_h = el.to_radians().sin();
+    let model_direct = sun_disc::clear_sky_direct_normal_lux(el) * sin_h;
+    let ratio = model_direct / sun_disc::clear_sky_diffuse_horizontal_lux(el);
+    let reading = o.reference.illuminance_lux;
+    let (direct, from, rescale) = match (photometry.map(|p| p.from), reading) {
+        // Absolute from a luminance reading, and the illuminance measured: the difference.
+        (Some("luminance"), Some(e)) => (e - diffuse, DirectSource::MeasuredIlluminance, 1.0),
+        (Some("luminance"), None) => (model_direct, DirectSource::ModelDirectNormal, 1.0),
+        // The illuminance reading alone set the scale, sun clipped: it is the total, split into
+        // diffuse and direct by the model.
+        (Some(_), Some(e)) => {
+            let k = e / (1.0 + ratio) / diffuse;
+            (e - e / (1.0 + ratio), DirectSource::ModelRatio, k)
+        }
+        _ => (ratio * diffuse, DirectSource::ModelRatio, 1.0),
+    };
+    if !(direct.is_finite() && direct > 0.0 && diffuse > 0.0 && rescale.is_finite()) {
+        return Some(Err(format!(
+            "the sun is clipped in every frame, but the dome without it already gives {} of the {} lux measured: the sun's disc was kept as merged (a lower bound)",
+            crate::image::fmt_num(diffuse.round()),
+            crate::image::fmt_num(reading.unwrap_or(f64::NAN).round())
+        )));
+    }
+    if rescale != 1.0 {
+        let k = rescale as f32;
+        f.image.data.iter_mut().for_each(|v| *v *= k);
+        diffuse *= rescale;
+    }
+    let weight: f64 = disc.iter().map(|p| p.coverage * p.weight).sum();
+    let luminance = direct / weight;
+    sun_disc::paint_disc(&mut f.image, &disc, luminance);
+    Some(Ok((
+        SunDiscReport {
+            direction: *sun,
+            luminance,
+            direct_normal: direct / sin_h,
+            direct_horizontal: direct,
+            diffuse_horizontal: diffuse,
+            from,
+            absolute: photometry.is_some(),
+            pixels: disc.len(),
+        },
+        rescale,
+    )))
 }
 
 /// The geometry of the merged (uncropped) photo: the lens, north (0 when unknown), the pose and
