@@ -18,6 +18,8 @@ use skydome::fisheye::{LensKind, LensProfile, Vignetting};
 use skydome::image::{Circle, HdrImage, PixelPoint};
 use skydome::photometry::{Reference, SpotLuminance};
 use skydome::pipeline::{self, Frames, Input, LensSource, Options, SkyOptions, SunDisc, SunMode};
+use skydome::render::ShIrradiance;
+use skydome::reproject::{reproject, MapProjection, ReprojectOptions};
 use skydome::sky::{radiance_luminance, Direction};
 use skydome::sun_disc::{sun_solid_angle_sr, DirectSource};
 use skydome::synth::{self, SynthOptions};
@@ -285,6 +287,10 @@ fn merge(r: &Rendered, sky: &Sky, sun_disc: SunDisc) -> Outcome {
             luminance: Some(spot),
             illuminance_lux: Some(reading_lux),
         },
+        products: pipeline::Products {
+            equirect: Some(pipeline::EquirectOptions::default()),
+            ..pipeline::Products::default()
+        },
         ..Options::default()
     };
     let input = Input::new(Frames::Decoded(photograph(r)));
@@ -331,6 +337,41 @@ fn map_error(out: &Outcome, truth: &Rendered) -> (f64, f64) {
     }
     errs.sort_by(f64::total_cmp);
     (errs[errs.len() / 2], errs[errs.len() * 95 / 100])
+}
+
+/// What the lit spheres' diffuse sphere shows (the order-2 SH irradiance `skydome render`
+/// shades it with), luminance units: on its side facing the sun, and on its side facing away
+/// from the sun's azimuth at the horizon (in the sun's shadow).
+fn lit_and_shadow(equirect: &HdrImage, sun: &Direction) -> (f64, f64) {
+    let sh = ShIrradiance::from_equirect(equirect).expect("SH");
+    let lit = radiance_luminance(sh.irradiance(sun.to_vector()));
+    let away = Direction::new(sun.azimuth_deg + 180.0, 0.0);
+    let shadow = radiance_luminance(sh.irradiance(away.to_vector()));
+    (lit, shadow)
+}
+
+/// The truth's equirectangular map, as `merge --equirect` lays it out.
+fn truth_equirect(truth: &Rendered, width: usize) -> HdrImage {
+    let g = skydome::sky::SkyGeometry::new(
+        &LensProfile {
+            vignetting: None,
+            ..lens()
+        },
+        0.0,
+        skydome::sky::DevicePose::ScreenDown,
+        skydome::sky::ImageOrientation::Normal,
+    )
+    .expect("geometry");
+    reproject(
+        &truth.image,
+        &g,
+        &MapProjection::Equirect {
+            width,
+            centre_azimuth_deg: 90.0,
+        },
+        &ReprojectOptions::default(),
+    )
+    .expect("reproject")
 }
 
 #[test]
@@ -430,5 +471,36 @@ fn reconstructed_suns_match_radiance_skies() {
         let gk = kept.dome.report.geometry.as_ref().expect("geometry");
         assert!(gk.sun_disc.is_none());
         assert!(gk.horizontal_illuminance < 0.9 * out.reading_lux, "{name}");
+
+        // The lit spheres: the diffuse sphere's sunny and shadowed sides as the truth's.
+        let ours_map = &out.dome.equirect.as_ref().expect("equirect").0;
+        let kept_map = &kept.dome.equirect.as_ref().expect("equirect").0;
+        let truth_map = truth_equirect(&truth, ours_map.width);
+        let (lit_t, shadow_t) = lit_and_shadow(&truth_map, &truth.sun);
+        let (lit_o, shadow_o) = lit_and_shadow(ours_map, &truth.sun);
+        let (lit_k, shadow_k) = lit_and_shadow(kept_map, &truth.sun);
+        eprintln!(
+            "{name}: diffuse sphere lit/shadow side, truth {lit_t:.0}/{shadow_t:.0} = {:.2}, rebuilt {lit_o:.0}/{shadow_o:.0} = {:.2}, kept {lit_k:.0}/{shadow_k:.0} = {:.2}",
+            lit_t / shadow_t,
+            lit_o / shadow_o,
+            lit_k / shadow_k
+        );
+        assert!(
+            (lit_o / lit_t - 1.0).abs() < 0.10,
+            "{name}: lit {lit_o} vs {lit_t}"
+        );
+        assert!(
+            (shadow_o / shadow_t - 1.0).abs() < 0.15,
+            "{name}: shadow {shadow_o} vs {shadow_t}"
+        );
+        let (ratio_o, ratio_t) = (lit_o / shadow_o, lit_t / shadow_t);
+        assert!(
+            (ratio_o / ratio_t - 1.0).abs() < 0.15,
+            "{name}: {ratio_o} vs {ratio_t}"
+        );
+        assert!(
+            lit_k / shadow_k < 0.6 * ratio_t,
+            "{name}: a kept sun casts a shadow?"
+        );
     }
 }
