@@ -77,6 +77,19 @@ pub struct FitArgs {
     /// fitted fall-off V(θ) goes into the profile and the merge divides it out.
     #[arg(long, value_name = "falloff.csv")]
     pub vignetting: Option<PathBuf>,
+    /// Flat-field photos (a uniform target through the lens; repeat the flag for several):
+    /// the fall-off V(θ) is measured from them instead of a CSV. Needs --camera to linearise
+    /// the codes.
+    #[arg(
+        long,
+        value_name = "photo",
+        conflicts_with = "vignetting",
+        requires = "camera"
+    )]
+    pub flat_field: Vec<PathBuf>,
+    /// The camera profile (from `skydome calibrate`) that linearises --flat-field photos.
+    #[arg(long, value_name = "camera.json")]
+    pub camera: Option<PathBuf>,
     /// The lens profile to write.
     #[arg(short, long, value_name = "lens.json")]
     pub output: PathBuf,
@@ -186,6 +199,35 @@ fn parse_centre(s: &str) -> Result<(f64, f64)> {
     }
 }
 
+/// The fall-off measured in flat-field photos, linearised with the camera profile.
+fn flat_field(
+    photos: &[PathBuf],
+    camera: &std::path::Path,
+    lens: &LensProfile,
+) -> Result<Vec<(f64, f64)>> {
+    let response = crate::merge::read_profile(camera)?
+        .response()
+        .with_context(|| camera.display().to_string())?;
+    let frames = photos
+        .iter()
+        .map(|p| {
+            // The library's decoding errors name the file.
+            let name = p.display().to_string();
+            Ok(skydome::bracket::decode(
+                &name,
+                &io::read(p)?,
+                &Default::default(),
+            )?)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let names = photos
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
+    fisheye::flat_field_falloff(&frames, lens, &response).with_context(|| names)
+}
+
 fn fit(a: FitArgs, quiet: bool) -> Result<()> {
     io::check_destination(&a.output, &[], a.force)?;
     let choice = match a.model.as_str() {
@@ -209,12 +251,22 @@ fn fit(a: FitArgs, quiet: bool) -> Result<()> {
         _ => bail!("give --csv pairs.csv --centre CX,CY (measured angles), or --circle CX,CY,R with --fov (nominal lens)"),
     };
     let mut profile = profile;
-    if let Some(csv) = &a.vignetting {
-        let pts: Vec<(f64, f64)> = read_pairs(csv)?
-            .iter()
-            .map(|p| (p.angle_deg, p.radius_px))
-            .collect();
-        let v = fisheye::Vignetting::fit(&pts).with_context(|| csv.display().to_string())?;
+    let falloff = match (&a.vignetting, a.camera.as_deref()) {
+        (Some(csv), _) => {
+            let pts: Vec<(f64, f64)> = read_pairs(csv)?
+                .iter()
+                .map(|p| (p.angle_deg, p.radius_px))
+                .collect();
+            Some((pts, csv.display().to_string()))
+        }
+        (None, Some(camera)) if !a.flat_field.is_empty() => Some((
+            flat_field(&a.flat_field, camera, &profile)?,
+            "flat field".into(),
+        )),
+        _ => None,
+    };
+    if let Some((pts, source)) = falloff {
+        let v = fisheye::Vignetting::fit(&pts).with_context(|| source.clone())?;
         if !quiet && !a.json {
             let [v30, v60, v90] = v.at_30_60_90();
             crate::out(&format!(

@@ -56,11 +56,13 @@
 mod circle;
 mod crop;
 mod fit;
+mod flat_field;
 mod projection;
 
 pub use circle::{detect_circle, detect_circle_luma, CircleFit};
 pub use crop::{crop_dome, DomeCrop};
 pub use fit::{fit_projection, parse_angle_radius_csv, AngleRadius, LensFit, ModelFit};
+pub use flat_field::{flat_field_falloff, RING_DEG};
 pub use projection::{LensKind, Projection};
 // The lens-profile JSON format lives with the other formats; re-exported here, where users
 // of the lens model look for it.
