@@ -162,6 +162,9 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         calibration =
             response::calibrate(&br.frames, a.calib.circle, &opts).context("calibration failed")?;
         report.sampling = Some(calibration.report());
+        if let Some(w) = calibration.report().relaxed_warning() {
+            io::warn(quiet, &w);
+        }
         if let Some(w) = calibration.report().shortfall_warning() {
             io::warn(quiet, &w);
         }

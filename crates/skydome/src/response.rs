@@ -85,6 +85,16 @@ pub enum ResponseError {
     /// λ or another parameter is out of range.
     #[error("invalid calibration option: {0}")]
     BadOption(String),
+    /// Every candidate sample was rejected, even with relaxed thresholds.
+    #[error("no calibration sample is usable: of the pixels tried, {clipped} were clipped or black, {edge} at edges and {non_monotonic} not brighter in longer exposures (frames out of order, misaligned, or a moving scene); check the exposure times and alignment, or use a saved camera profile")]
+    NoSamples {
+        /// Rejected as clipped or black.
+        clipped: usize,
+        /// Rejected as edges.
+        edge: usize,
+        /// Rejected as non-monotonic.
+        non_monotonic: usize,
+    },
     /// The normal equations are singular (no usable variation in the samples).
     #[error("the response cannot be solved for channel {channel}: the samples do not vary enough (use more samples, a bracket with wider exposure steps, or a less clipped scene)")]
     Singular {
@@ -364,6 +374,14 @@ pub fn calibrate(
     let lt = log_times(frames)?;
     check_lambda(opts.lambda)?;
     let samples = sample(frames, circle, &opts.sampling)?;
+    if samples.positions.is_empty() {
+        let r = &samples.report;
+        return Err(ResponseError::NoSamples {
+            clipped: r.rejected_clipped,
+            edge: r.rejected_edge,
+            non_monotonic: r.rejected_non_monotonic,
+        });
+    }
     calibrate_samples(samples, &lt, opts.lambda, opts.solver)
 }
 

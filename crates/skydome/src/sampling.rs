@@ -270,6 +270,16 @@ pub struct SampleReport {
     /// by the smoothness term.
     #[serde(default)]
     pub code_range: [[u8; 2]; 3],
+    /// How many times the edge and monotonicity thresholds were doubled because too few
+    /// samples passed them (noisy frames); 0 = as asked.
+    #[serde(default)]
+    pub relaxed: u32,
+    /// The edge threshold in force (8-bit codes).
+    #[serde(default)]
+    pub edge_threshold: f32,
+    /// The monotonicity tolerance in force (8-bit codes).
+    #[serde(default)]
+    pub monotonic_tolerance: u8,
 }
 
 impl SampleReport {
@@ -290,6 +300,16 @@ impl SampleReport {
             "the response is measured only over codes {} (the rest is extrapolated by smoothness, so radiance from those codes is less certain); a bracket with more frames or a scene with darker and brighter parts covers more",
             short.join(", ")
         ))
+    }
+
+    /// A warning when the rejection thresholds had to be relaxed ([`SampleReport::relaxed`]).
+    pub fn relaxed_warning(&self) -> Option<String> {
+        (self.relaxed > 0).then(|| {
+            format!(
+                "the frames are noisy: too few samples passed the edge and monotonicity tests, so they were relaxed to {} and {} codes (the curve rests on noisier samples)",
+                self.edge_threshold, self.monotonic_tolerance
+            )
+        })
     }
 
     /// A warning when the samples used give fewer observations than the solve needs,
@@ -387,6 +407,41 @@ pub fn sample(
     opts: &SampleOptions,
 ) -> Result<Samples, SamplingError> {
     opts.validate()?;
+    let mut o = opts.clone();
+    let mut out = sample_once(frames, circle, &o)?;
+    // Noisy frames (a small sensor, many frames, 1-EV steps) fail the edge and monotonicity
+    // tests by noise alone: fewer than half the samples survive, or none. The thresholds are
+    // then doubled, up to twice (edge 32 codes, monotonic 16 codes from the defaults), and the
+    // report says so; a curve from relaxed samples beats no curve or one held by smoothness.
+    let mut relaxed = 0;
+    while o.reject && relaxed < MAX_RELAXATIONS && out.report.used * 2 < out.report.target {
+        relaxed += 1;
+        o.edge_threshold *= 2.0;
+        o.monotonic_tolerance = o.monotonic_tolerance.saturating_mul(2);
+        let again = sample_once(frames, circle, &o)?;
+        if again.report.used > out.report.used {
+            out = again;
+            out.report.relaxed = relaxed;
+            out.report.edge_threshold = o.edge_threshold;
+            out.report.monotonic_tolerance = o.monotonic_tolerance;
+        }
+    }
+    if out.report.relaxed == 0 {
+        out.report.edge_threshold = opts.edge_threshold;
+        out.report.monotonic_tolerance = opts.monotonic_tolerance;
+    }
+    Ok(out)
+}
+
+/// How many times [`sample`] doubles the edge and monotonicity thresholds when too few samples
+/// survive them.
+pub const MAX_RELAXATIONS: u32 = 2;
+
+fn sample_once(
+    frames: &[Frame],
+    circle: Option<Circle>,
+    opts: &SampleOptions,
+) -> Result<Samples, SamplingError> {
     let (w, h) = check_frames(frames)?;
     let p = frames.len();
 

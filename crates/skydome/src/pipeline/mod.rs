@@ -485,6 +485,7 @@ pub fn run(
         ResponseSource::Profile(prof) => (prof.response()?, None, None, "profile".to_string()),
         ResponseSource::Calibrate(o) => {
             let cal = response::calibrate(&br.frames, circle, o)?;
+            warnings.extend(cal.report().relaxed_warning());
             warnings.extend(cal.report().shortfall_warning());
             warnings.extend(cal.report().range_warning());
             let mut prof = cal.to_profile();
