@@ -90,6 +90,9 @@ pub fn hint(e: PipelineError) -> anyhow::Error {
             " with --times 1/400,1/100,... (in file order) or --times-file LIST (lines 'FILE TIME')"
         }
         PipelineError::Bracket(B::TooLarge { .. }) => "; raise it with --max-pixels",
+        PipelineError::Bracket(B::DarkerWhenLonger { .. }) => {
+            " (the EXIF times, or --times / --times-file in file order)"
+        }
         PipelineError::Bracket(B::OrientationMismatch { .. }) => " (use --orientation ignore)",
         PipelineError::CircleNotFound { .. } => " with --circle CX,CY,R",
         PipelineError::NoEphemeris => " (--time, --lat, --lon)",

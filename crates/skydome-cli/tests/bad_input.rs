@@ -177,6 +177,14 @@ fn bad_input_gives_one_line_error_exit_1_and_no_output() {
             "invalid exposure time '0'".into(),
         ),
         (
+            "times that belong to other photos",
+            merge(
+                &["f0.png", "f1.png", "f2.png"],
+                &["--times", "1/25,1/100,1/400"],
+            ),
+            "at most pixels although it was exposed longer".into(),
+        ),
+        (
             "wrong count of times",
             merge(&["f0.png", "f1.png", "f2.png"], &["--times", "1/100,1/25"]),
             "--times has 2 values but 3 files".into(),

@@ -419,6 +419,19 @@ pub enum BracketError {
         /// Claimed difference in stops.
         stops: f64,
     },
+    /// A frame exposed longer than another is darker at most pixels: the exposure times do not
+    /// belong to the photos.
+    #[error("{file} ({e1}) is darker than {other} ({e2}) at most pixels although it was exposed longer: the exposure times do not belong to these photos (swapped or mistyped); check them")]
+    DarkerWhenLonger {
+        /// The frame exposed longer.
+        file: String,
+        /// Its exposure, formatted.
+        e1: String,
+        /// The frame exposed shorter.
+        other: String,
+        /// Its exposure, formatted.
+        e2: String,
+    },
     /// EXIF orientations disagree.
     #[error("{file}: EXIF orientation {o} differs from {first} ({o0}); ignore EXIF orientation (keep the stored pixel order) to merge them")]
     OrientationMismatch {
@@ -914,6 +927,17 @@ pub fn assemble(
             });
         }
     }
+    for pair in frames.windows(2) {
+        let (a, b) = (&pair[0], &pair[1]);
+        if darker_when_longer(a, b) {
+            return Err(BracketError::DarkerWhenLonger {
+                file: b.name.clone(),
+                e1: describe(&b.exposure),
+                other: a.name.clone(),
+                e2: describe(&a.exposure),
+            });
+        }
+    }
     let pixel_orientation = match orientation {
         OrientationPolicy::Apply => 1,
         OrientationPolicy::Ignore => info.orientation,
@@ -1083,6 +1107,28 @@ fn nearly_identical(a: &Frame, b: &Frame, floor: f32) -> bool {
     (ma - mb).abs() < 0.02 * ma.max(mb) && sad / (count as f64) < 0.015
 }
 
+/// True when `b`, exposed longer than `a`, is clearly darker at most pixels where the two
+/// differ clearly (by more than 3 % of the code range): a code never falls as exposure grows,
+/// so the times must belong to other photos. Noise, JPEG and a little motion make a few
+/// pixels darker in any real bracket; a majority needs swapped times.
+fn darker_when_longer(a: &Frame, b: &Frame) -> bool {
+    let n = a.pixels.len().min(b.pixels.len());
+    let (mut darker, mut brighter) = (0usize, 0usize);
+    let mut i = 0;
+    while i + 2 < n {
+        for c in 0..3 {
+            let d = b.pixels.unit(i + c) - a.pixels.unit(i + c);
+            if d < -0.03 {
+                darker += 1;
+            } else if d > 0.03 {
+                brighter += 1;
+            }
+        }
+        i += 21;
+    }
+    darker >= 100 && darker > brighter
+}
+
 /// Applies EXIF orientation `o` (2..=8) to interleaved RGB samples.
 fn orient(w: usize, h: usize, pixels: Pixels, o: u16) -> (usize, usize, Pixels) {
     fn go<T: Copy + Default>(w: usize, h: usize, src: &[T], o: u16) -> (usize, usize, Vec<T>) {
@@ -1140,6 +1186,33 @@ mod tests {
             },
             non_srgb_icc: None,
         }
+    }
+
+    #[test]
+    fn times_that_do_not_belong_to_the_photos_are_refused() {
+        // A scene of codes 10..=250; the frame twice as long is twice as bright (clipped).
+        let scene = |i: usize| 10 + (i * 7919 % 241) as u8;
+        let short = |t| frame("short.jpg", 64, 64, scene, t);
+        let long = |t| frame("long.jpg", 64, 64, |i| scene(i).saturating_mul(2), t);
+        assert!(assemble(
+            vec![short(0.01), long(0.02)],
+            None,
+            OrientationPolicy::Apply
+        )
+        .is_ok());
+        // The times swapped: the brighter photo claims the shorter time.
+        let e = assemble(
+            vec![short(0.02), long(0.01)],
+            None,
+            OrientationPolicy::Apply,
+        )
+        .unwrap_err();
+        assert!(matches!(e, BracketError::DarkerWhenLonger { .. }), "{e}");
+        let msg = e.to_string();
+        assert!(
+            msg.starts_with("short.jpg (1/50 s") && msg.contains("long.jpg"),
+            "{msg}"
+        );
     }
 
     #[test]
