@@ -42,6 +42,9 @@ struct Info {
     absolute: bool,
     /// Luminance `179 × (0.265 R + 0.670 G + 0.065 B)` of the pixels, cd/m² when `absolute`.
     luminance: Option<skydome::photometry::LuminanceSummary>,
+    /// For an upward fish-eye (`VIEW=` with `-vd 0 0 1`): the horizontal illuminance of the
+    /// hemisphere, lux when `absolute` (what `evalglare -V` reports).
+    horizontal_illuminance: Option<f64>,
 }
 
 /// The top-level entry point for `skydome info`.
@@ -63,6 +66,16 @@ pub fn run(a: Args) -> Result<()> {
     let invalid = st.invalid_pixels as usize;
     let absolute = r.meta.is_absolute();
     let luminance = skydome::photometry::luminance_summary(img);
+    let horizontal_illuminance = r
+        .meta
+        .view
+        .as_deref()
+        .and_then(|v| skydome::sky::SkyGeometry::from_radiance_view(v, img.width, img.height))
+        .map(|g| {
+            skydome::sky::radiance_luminance(skydome::reproject::horizontal_irradiance_fisheye(
+                img, &g,
+            ))
+        });
     let info = Info {
         file: a.file.display().to_string(),
         format: r.format,
@@ -79,6 +92,7 @@ pub fn run(a: Args) -> Result<()> {
         dynamic_range_stops_robust: dr_robust,
         absolute,
         luminance,
+        horizontal_illuminance,
     };
     if a.json {
         crate::out(&serde_json::to_string_pretty(&info)?);
@@ -107,6 +121,10 @@ pub fn run(a: Args) -> Result<()> {
             "luminance ({unit}): median {:.4e}, p99 {:.4e}, max {:.4e}, mean {:.4e}\n",
             l.median, l.p99, l.max, l.mean
         );
+    }
+    if let Some(e) = info.horizontal_illuminance {
+        let unit = if absolute { "lx" } else { "(relative)" };
+        s += &format!("horizontal illuminance of the upward view: {e:.4e} {unit}\n");
     }
     if invalid > 0 {
         s += &format!("{invalid} pixels are NaN, infinite or negative\n");

@@ -240,6 +240,15 @@ fn absolute_calibration_from_illuminance_and_spot_luminance() {
         max > 0.1 * disc_l && max <= disc_l * 1.001,
         "{max} vs {disc_l}"
     );
+    // And the illuminance, from the upward VIEW= of the angular map, as evalglare -V does.
+    let o = Command::new(BIN)
+        .args(["info", "--json"])
+        .arg(dir.path().join("sun_vta.hdr"))
+        .output()
+        .unwrap();
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let e = info["horizontal_illuminance"].as_f64().unwrap();
+    assert!((e / lux_true - 1.0).abs() < 0.02, "info {e} vs {lux_true}");
     // Radiance sees the rebuilt sun in the angular map too.
     if let Some((bin, lib)) = radiance() {
         let theirs = evalglare_v(&bin, &lib, &dir.path().join("sun_vta.hdr"));

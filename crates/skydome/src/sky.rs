@@ -549,6 +549,54 @@ impl SkyGeometry {
         ))
     }
 
+    /// The geometry of a `width × height` picture from its Radiance `VIEW=` options, when it is
+    /// an upward fish-eye skydome (or Radiance) can integrate: a square picture, `-vta`,
+    /// `-vts` or `-vth`, `-vd 0 0 1`, a horizontal `-vu` (its azimuth is the top edge's, north
+    /// for `0 1 0`) and `-vh` = `-vv` (the angle the picture spans edge to edge). `None`
+    /// otherwise. The inverse of [`SkyGeometry::radiance_view`] for the views it writes.
+    pub fn from_radiance_view(view: &str, width: usize, height: usize) -> Option<SkyGeometry> {
+        use crate::fisheye::{LensKind, LensProfile};
+        let tokens: Vec<&str> = view.split_whitespace().collect();
+        let (mut kind, mut vd, mut vu, mut vh, mut vv) = (None, None, [0.0, 1.0, 0.0], None, None);
+        let num = |i: usize| tokens.get(i).and_then(|t| t.parse::<f64>().ok());
+        let vec3 = |i: usize| Some([num(i)?, num(i + 1)?, num(i + 2)?]);
+        for (i, t) in tokens.iter().enumerate() {
+            match *t {
+                "-vta" => kind = Some(LensKind::Equidistant),
+                "-vts" => kind = Some(LensKind::Stereographic),
+                "-vth" => kind = Some(LensKind::Orthographic),
+                t if t.starts_with("-vt") => return None,
+                "-vd" => vd = vec3(i + 1),
+                "-vu" => vu = vec3(i + 1)?,
+                "-vh" => vh = num(i + 1),
+                "-vv" => vv = num(i + 1),
+                _ => {}
+            }
+        }
+        let (kind, vd, vh, vv) = (kind?, vd?, vh?, vv?);
+        let len = (vd[0] * vd[0] + vd[1] * vd[1] + vd[2] * vd[2]).sqrt();
+        let upward = len > 0.0 && (vd[2] / len - 1.0).abs() < 1e-9;
+        let level_up = vu[2].abs() < 1e-9 && vu[0].hypot(vu[1]) > 0.0;
+        if !(upward && level_up && width == height && width > 0 && (vh - vv).abs() < 1e-6) {
+            return None;
+        }
+        let half = 0.5 * width as f64;
+        let circle = crate::image::Circle {
+            cx: half,
+            cy: half,
+            r: half,
+        };
+        let lens = LensProfile::from_fov(circle, vh, kind).ok()?;
+        let north = vu[0].atan2(vu[1]).to_degrees();
+        SkyGeometry::new(
+            &lens,
+            north,
+            DevicePose::ScreenDown,
+            ImageOrientation::Normal,
+        )
+        .ok()
+    }
+
     /// The north point: where true north meets the horizon (for `#NORTH=`), stored pixels.
     pub fn north_point(&self) -> PixelPoint {
         self.compass_point(0.0)

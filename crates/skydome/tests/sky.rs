@@ -529,3 +529,50 @@ fn polynomial_lens_profile_maps_pixels_and_directions_both_ways() {
         }
     }
 }
+
+#[test]
+fn radiance_views_read_back_as_the_geometry_that_wrote_them() {
+    for (kind, north) in [
+        (LensKind::Equidistant, 0.0),
+        (LensKind::Stereographic, 37.0),
+        (LensKind::Orthographic, -120.0),
+    ] {
+        let size = 300usize;
+        let half = size as f64 / 2.0;
+        let c = Circle {
+            cx: half,
+            cy: half,
+            r: half,
+        };
+        let fov = if kind == LensKind::Orthographic {
+            180.0
+        } else {
+            181.5
+        };
+        let lens = LensProfile::from_fov(c, fov, kind).unwrap();
+        let g = SkyGeometry::new(
+            &lens,
+            north,
+            DevicePose::ScreenDown,
+            ImageOrientation::Normal,
+        )
+        .unwrap();
+        let view = g.radiance_view(half).expect("a Radiance view");
+        let back = SkyGeometry::from_radiance_view(&view, size, size)
+            .unwrap_or_else(|| panic!("{kind:?}: {view}"));
+        for (x, y) in [(150.5, 20.0), (40.0, 200.0), (150.0, 150.0), (260.0, 90.0)] {
+            let (a, b) = (g.pixel_to_vector(x, y), back.pixel_to_vector(x, y));
+            let (a, b) = (a.unwrap(), b.unwrap());
+            let d = (0..3).map(|i| (a[i] - b[i]).abs()).fold(0.0, f64::max);
+            assert!(d < 1e-5, "{kind:?} at ({x}, {y}): {a:?} vs {b:?} ({view})");
+        }
+    }
+    // Not an upward square fish-eye: nothing to integrate.
+    let up = "-vta -vp 0 0 0 -vd 0 0 1 -vu 0 1 0 -vh 180 -vv 180";
+    assert!(SkyGeometry::from_radiance_view(up, 100, 100).is_some());
+    assert!(SkyGeometry::from_radiance_view(up, 100, 80).is_none());
+    let side = "-vta -vp 0 0 0 -vd 0 1 0 -vu 0 0 1 -vh 180 -vv 180";
+    assert!(SkyGeometry::from_radiance_view(side, 100, 100).is_none());
+    let persp = "-vtv -vp 0 0 0 -vd 0 0 1 -vu 0 1 0 -vh 60 -vv 60";
+    assert!(SkyGeometry::from_radiance_view(persp, 100, 100).is_none());
+}
