@@ -178,7 +178,8 @@ pub fn absolute_scale(
 }
 
 /// Radiance-luminance statistics of an image ([`radiance_luminance`] of every pixel with a
-/// finite, non-negative value): cd/m² for an absolute map.
+/// finite, non-negative value): cd/m² for an absolute map. `min`, `max` and `mean` are exact;
+/// `median` and `p99` are resolved to 1/64 of a stop (about 1 %).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LuminanceSummary {
     /// Smallest.
@@ -193,33 +194,50 @@ pub struct LuminanceSummary {
     pub mean: f64,
 }
 
-/// [`LuminanceSummary`] of `img`; `None` when no pixel has a valid value.
+/// Histogram bins of a positive `f32` by its bits: exponent and the top 6 bits of the
+/// mantissa, i.e. 1/64-octave bins in order of value, with no logarithm per pixel.
+const BIN_SHIFT: u32 = 17;
+
+/// [`LuminanceSummary`] of `img`; `None` when no pixel has a valid value. One pass over the
+/// pixels with a histogram for the percentiles (an exact sort of a 6 MP map cost more than
+/// the rest of `skydome info`).
 pub fn luminance_summary(img: &HdrImage) -> Option<LuminanceSummary> {
-    let mut l: Vec<f64> = img
-        .pixels()
-        .map(|p| radiance_luminance(p.map(f64::from)))
-        .filter(|v| v.is_finite() && *v >= 0.0)
-        .collect();
-    if l.is_empty() {
-        return None;
-    }
-    let n = l.len();
-    let mean = l.iter().sum::<f64>() / n as f64;
+    let mut hist = vec![0u64; (u32::MAX >> 1 >> BIN_SHIFT) as usize + 1];
+    let (mut n, mut sum) = (0u64, 0.0f64);
     let (mut min, mut max) = (f64::INFINITY, 0.0f64);
-    for &v in &l {
+    for p in img.pixels() {
+        let v = radiance_luminance(p.map(f64::from));
+        if !(v.is_finite() && v >= 0.0) {
+            continue;
+        }
+        n += 1;
+        sum += v;
         min = min.min(v);
         max = max.max(v);
+        hist[((v as f32).to_bits() >> BIN_SHIFT) as usize] += 1;
     }
-    let median = *l.select_nth_unstable_by(n / 2, f64::total_cmp).1;
-    let p99 = *l
-        .select_nth_unstable_by((n * 99 / 100).min(n - 1), f64::total_cmp)
-        .1;
+    if n == 0 {
+        return None;
+    }
+    let at = |q: f64| {
+        let rank = ((q * n as f64).floor() as u64).min(n - 1);
+        let mut seen = 0u64;
+        for (bin, &c) in hist.iter().enumerate() {
+            seen += c;
+            if seen > rank {
+                // The middle of the bin, kept within the exact extremes.
+                let mid = f32::from_bits(((bin as u32) << BIN_SHIFT) | (1 << (BIN_SHIFT - 1)));
+                return f64::from(mid).clamp(min, max);
+            }
+        }
+        max
+    };
     Some(LuminanceSummary {
         min,
-        median,
-        p99,
+        median: at(0.5),
+        p99: at(0.99),
         max,
-        mean,
+        mean: sum / n as f64,
     })
 }
 
@@ -269,8 +287,9 @@ mod tests {
     fn summary_of_radiance_luminance() {
         let s = luminance_summary(&img()).unwrap();
         assert!((s.min - 179.0).abs() < 1e-9 && (s.max - 179.0 * 100.0).abs() < 1e-6);
-        assert!((s.median - 179.0 * 51.0).abs() < 1e-6, "{s:?}");
-        assert!((s.p99 - 179.0 * 100.0).abs() < 1e-6, "{s:?}");
+        // Percentiles to 1/64 stop (1.1 %).
+        assert!((s.median / (179.0 * 51.0) - 1.0).abs() < 0.011, "{s:?}");
+        assert!((s.p99 / (179.0 * 100.0) - 1.0).abs() < 0.011, "{s:?}");
         assert!((s.mean - 179.0 * 50.5).abs() < 1e-6, "{s:?}");
         assert!(luminance_summary(&HdrImage::new(0, 0)).is_none());
     }
