@@ -4,37 +4,13 @@
 //! from the `pyradiance` package (PyPI), found through `SKYDOME_PYTHON`; CI requires them
 //! (`SKYDOME_REQUIRE_INDEPENDENT_READERS=1`).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_skydome");
 
-/// pyradiance's `bin` and `lib` folders, or `None` (skipped) when it is not installed.
-fn radiance() -> Option<(PathBuf, PathBuf)> {
-    let py = std::env::var("SKYDOME_PYTHON").unwrap_or_else(|_| "python3".into());
-    let out = Command::new(&py)
-        .args([
-            "-c",
-            "import os, pyradiance; print(os.path.dirname(pyradiance.__file__))",
-        ])
-        .output()
-        .ok()
-        .filter(|o| o.status.success());
-    match out {
-        Some(o) => {
-            let dir = PathBuf::from(String::from_utf8_lossy(&o.stdout).trim());
-            Some((dir.join("bin"), dir.join("lib")))
-        }
-        None => {
-            assert!(
-                std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").as_deref() != Ok("1"),
-                "{py} lacks pyradiance but SKYDOME_REQUIRE_INDEPENDENT_READERS=1"
-            );
-            eprintln!("skipping: {py} lacks pyradiance (pip install -r scripts/requirements.txt)");
-            None
-        }
-    }
-}
+#[path = "../../skydome/tests/common/mod.rs"]
+mod common;
 
 fn evalglare_v(bin: &Path, lib: &Path, file: &Path) -> f64 {
     let o = Command::new(bin.join("evalglare"))
@@ -56,7 +32,7 @@ fn evalglare_v(bin: &Path, lib: &Path, file: &Path) -> f64 {
 
 #[test]
 fn evalglare_reads_every_dome_and_agrees_on_illuminance() {
-    let Some((bin, lib)) = radiance() else {
+    let Some((bin, lib)) = common::radiance_tools() else {
         return;
     };
     let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../demo");
@@ -158,7 +134,7 @@ fn absolute_calibration_from_illuminance_and_spot_luminance() {
     let head = std::fs::read(dir.path().join("lux.hdr")).unwrap();
     let head = String::from_utf8_lossy(&head[..600]);
     assert!(head.contains("#UNITS= absolute"), "{head}");
-    if let Some((bin, lib)) = radiance() {
+    if let Some((bin, lib)) = common::radiance_tools() {
         let theirs = evalglare_v(&bin, &lib, &dir.path().join("lux_vta.hdr"));
         assert!((theirs / lux - 1.0).abs() < 0.02, "evalglare {theirs}");
     }
@@ -250,7 +226,7 @@ fn absolute_calibration_from_illuminance_and_spot_luminance() {
     let e = info["horizontal_illuminance"].as_f64().unwrap();
     assert!((e / lux_true - 1.0).abs() < 0.02, "info {e} vs {lux_true}");
     // Radiance sees the rebuilt sun in the angular map too.
-    if let Some((bin, lib)) = radiance() {
+    if let Some((bin, lib)) = common::radiance_tools() {
         let theirs = evalglare_v(&bin, &lib, &dir.path().join("sun_vta.hdr"));
         assert!(
             (theirs / lux_true - 1.0).abs() < 0.02,

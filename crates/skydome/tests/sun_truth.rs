@@ -10,7 +10,7 @@
 //! reading, and the sky map close to the render; an overcast sky gets no disc. CI requires the
 //! tools (`SKYDOME_REQUIRE_INDEPENDENT_READERS=1`).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use skydome::bracket::{CaptureInfo, DecodedFrame};
@@ -24,32 +24,7 @@ use skydome::sky::{radiance_luminance, Direction};
 use skydome::sun_disc::{sun_solid_angle_sr, DirectSource};
 use skydome::synth::{self, SynthOptions};
 
-/// pyradiance's `bin` and `lib` folders, or `None` (skipped) when it is not installed.
-fn radiance() -> Option<(PathBuf, PathBuf)> {
-    let py = std::env::var("SKYDOME_PYTHON").unwrap_or_else(|_| "python3".into());
-    let out = Command::new(&py)
-        .args([
-            "-c",
-            "import os, pyradiance; print(os.path.dirname(pyradiance.__file__))",
-        ])
-        .output()
-        .ok()
-        .filter(|o| o.status.success());
-    match out {
-        Some(o) => {
-            let dir = PathBuf::from(String::from_utf8_lossy(&o.stdout).trim());
-            Some((dir.join("bin"), dir.join("lib")))
-        }
-        None => {
-            assert!(
-                std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").as_deref() != Ok("1"),
-                "{py} lacks pyradiance but SKYDOME_REQUIRE_INDEPENDENT_READERS=1"
-            );
-            eprintln!("skipping: {py} lacks pyradiance (pip install -r scripts/requirements.txt)");
-            None
-        }
-    }
-}
+mod common;
 
 /// A Radiance sky: what gendaylit was told and what it wrote.
 struct Sky {
@@ -376,7 +351,7 @@ fn truth_equirect(truth: &Rendered, width: usize) -> HdrImage {
 
 #[test]
 fn reconstructed_suns_match_radiance_skies() {
-    let Some((bin, lib)) = radiance() else {
+    let Some((bin, lib)) = common::radiance_tools() else {
         return;
     };
     let skies = [

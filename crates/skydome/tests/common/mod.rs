@@ -45,3 +45,33 @@ pub fn load_jpegs(dir: &Path, files: &[(&str, f64)]) -> Vec<Frame> {
     frames.sort_by(|a, b| a.exposure.time_s.total_cmp(&b.exposure.time_s));
     frames
 }
+
+/// pyradiance's `bin` and `lib` folders (Radiance's own binaries: `gendaylit`, `rpict`,
+/// `evalglare` …), found through the Python in `SKYDOME_PYTHON` (default `python3`); `None`
+/// (skipped, with a message) when it lacks pyradiance, a failure instead when
+/// `SKYDOME_REQUIRE_INDEPENDENT_READERS=1` (CI).
+pub fn radiance_tools() -> Option<(PathBuf, PathBuf)> {
+    let py = std::env::var("SKYDOME_PYTHON").unwrap_or_else(|_| "python3".into());
+    let out = std::process::Command::new(&py)
+        .args([
+            "-c",
+            "import os, pyradiance; print(os.path.dirname(pyradiance.__file__))",
+        ])
+        .output()
+        .ok()
+        .filter(|o| o.status.success());
+    match out {
+        Some(o) => {
+            let dir = PathBuf::from(String::from_utf8_lossy(&o.stdout).trim());
+            Some((dir.join("bin"), dir.join("lib")))
+        }
+        None => {
+            assert!(
+                std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").as_deref() != Ok("1"),
+                "{py} lacks pyradiance but SKYDOME_REQUIRE_INDEPENDENT_READERS=1"
+            );
+            eprintln!("skipping: {py} lacks pyradiance (pip install -r scripts/requirements.txt)");
+            None
+        }
+    }
+}
