@@ -636,7 +636,8 @@ pub fn horizontal_irradiance_fisheye(img: &HdrImage, geom: &SkyGeometry) -> [f64
     let proj = *geom.projection();
     let (cx, cy) = geom.centre();
     let r90 = proj.radius(std::f64::consts::FRAC_PI_2);
-    let weight = |dx: f64, dy: f64| horizontal_weight(&proj, dx.hypot(dy));
+    let hw = HorizontalWeight::new(&proj);
+    let weight = |dx: f64, dy: f64| hw.at(dx.hypot(dy));
     let y0 = (cy - r90 - 1.0).floor().max(0.0) as usize;
     let y1 = ((cy + r90 + 1.0).ceil().max(0.0) as usize).min(img.height);
     let x0 = (cx - r90 - 1.0).floor().max(0.0) as usize;
@@ -688,16 +689,42 @@ pub fn horizontal_irradiance_fisheye(img: &HdrImage, geom: &SkyGeometry) -> [f64
 /// symmetric projection `sin θ / (ρ · r′(θ))`) times the cosine of its zenith angle θ (the
 /// optical axis taken as the zenith). 0 below the horizon and beyond the lens.
 pub fn horizontal_weight(proj: &Projection, rho: f64) -> f64 {
-    if rho > proj.radius(std::f64::consts::FRAC_PI_2) {
-        return 0.0;
-    }
-    if rho < 1e-9 {
+    HorizontalWeight::new(proj).at(rho)
+}
+
+/// [`horizontal_weight`] with the projection's constants worked out once (a polynomial
+/// lens's angle limit takes thousands of evaluations): for loops over pixels.
+pub(crate) struct HorizontalWeight {
+    proj: Projection,
+    r90: f64,
+    centre: f64,
+    limit: f64,
+}
+
+impl HorizontalWeight {
+    pub(crate) fn new(proj: &Projection) -> Self {
         let d0 = proj.derivative(0.0);
-        return 1.0 / (d0 * d0);
+        Self {
+            proj: *proj,
+            r90: proj.radius(std::f64::consts::FRAC_PI_2),
+            centre: 1.0 / (d0 * d0),
+            limit: proj.theta_limit(),
+        }
     }
-    match proj.theta_within(rho, proj.theta_limit()) {
-        Some(t) => t.cos() * t.sin() / (rho * proj.derivative(t)),
-        None => 0.0,
+
+    /// The weight at `rho` pixels from the optical centre.
+    #[inline]
+    pub(crate) fn at(&self, rho: f64) -> f64 {
+        if rho > self.r90 {
+            return 0.0;
+        }
+        if rho < 1e-9 {
+            return self.centre;
+        }
+        match self.proj.theta_within(rho, self.limit) {
+            Some(t) => t.cos() * t.sin() / (rho * self.proj.derivative(t)),
+            None => 0.0,
+        }
     }
 }
 

@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::image::{HdrImage, PixelPoint};
 use crate::merge::CLIPPED_HIGH;
-use crate::reproject::horizontal_weight;
+use crate::reproject::HorizontalWeight;
 use crate::sky::{radiance_luminance, Direction, SkyGeometry, RADIANCE_EFFICACY};
 
 /// Angular radius of the solar disc, degrees (mean Earth–Sun distance).
@@ -106,7 +106,8 @@ pub struct DiscPixel {
     /// Fraction of the pixel the disc covers, `0..=1` (a hair over 1 can remain from the
     /// scaling to the exact solid angle).
     pub coverage: f64,
-    /// The pixel's horizontal weight `cos θ · dω` (sr), see [`horizontal_weight`].
+    /// The pixel's horizontal weight `cos θ · dω` (sr), see
+    /// [`horizontal_weight`](crate::reproject::horizontal_weight).
     pub weight: f64,
 }
 
@@ -147,6 +148,7 @@ pub fn disc_pixels(
     let y0 = (c.y - reach).floor().max(0.0) as usize;
     let x1 = ((c.x + reach).ceil().max(0.0) as usize).min(width);
     let y1 = ((c.y + reach).ceil().max(0.0) as usize).min(height);
+    let hw = HorizontalWeight::new(&proj);
     let mut out = Vec::new();
     for y in y0..y1 {
         for x in x0..x1 {
@@ -169,7 +171,7 @@ pub fn disc_pixels(
                     x,
                     y,
                     coverage: inside as f64 / (k * k) as f64,
-                    weight: horizontal_weight(&proj, dx.hypot(dy)),
+                    weight: hw.at(dx.hypot(dy)),
                 });
             }
         }
