@@ -526,33 +526,72 @@ fn consistency_band<T: Code, const N: usize>(
             continue;
         }
         tested += 1;
-        let vb = v[best];
-        let mut bad = false;
-        for (j, vj) in v.iter().enumerate() {
-            if j == best {
-                continue;
-            }
-            for c in 0..3 {
-                let (a, b) = (vj[c], vb[c]);
-                if a[1].is_finite() && b[1].is_finite() {
-                    let lim = CONSISTENCY_SIGMAS * (a[1] * a[1] + b[1] * b[1]).sqrt();
-                    bad |= (a[0] - b[0]).abs() > lim;
-                }
-            }
-        }
+        // Two frames agree when every channel both can judge lies within the noise.
+        let agree = |a: &[[f32; 2]; 3], b: &[[f32; 2]; 3]| {
+            (0..3).all(|c| {
+                let (a, b) = (a[c], b[c]);
+                !(a[1].is_finite() && b[1].is_finite())
+                    || (a[0] - b[0]).abs()
+                        <= CONSISTENCY_SIGMAS * (a[1] * a[1] + b[1] * b[1]).sqrt()
+            })
+        };
+        let bad = v
+            .iter()
+            .enumerate()
+            .any(|(j, vj)| j != best && !agree(vj, &v[best]));
         *fl = bad as u8;
         if bad {
             flagged += 1;
             if ghosts {
-                for c in 0..3 {
-                    if vb[c][1].is_finite() {
-                        o[c] = fast_exp2(vb[c][0]);
-                    }
-                }
+                ghost_free(&v, best, &agree, o);
             }
         }
     }
     (tested, flagged)
+}
+
+/// The ghost-aware value of a pixel whose frames disagree: the reference is the frame that
+/// agrees with the most others (what moved is usually in the minority), ties going to the
+/// best-exposed frame `best`; the value is the precision-weighted mean of the log votes of the
+/// frames that agree with the reference. (Trusting the best-exposed frame alone kept the moved
+/// content whenever the frame that saw it was the best exposed: twice the plain merge's error.)
+fn ghost_free(
+    v: &[[[f32; 2]; 3]],
+    best: usize,
+    agree: &dyn Fn(&[[f32; 2]; 3], &[[f32; 2]; 3]) -> bool,
+    o: &mut [f32],
+) {
+    let usable = |x: &[[f32; 2]; 3]| x.iter().any(|c| c[1].is_finite());
+    let support = |j: usize| {
+        v.iter()
+            .enumerate()
+            .filter(|&(k, vk)| k != j && usable(vk) && agree(&v[j], vk))
+            .count()
+    };
+    let mut reference = best;
+    let mut most = support(best);
+    for (j, vj) in v.iter().enumerate() {
+        if j != best && usable(vj) {
+            let s = support(j);
+            if s > most {
+                (reference, most) = (j, s);
+            }
+        }
+    }
+    for c in 0..3 {
+        let (mut num, mut den) = (0f32, 0f32);
+        for vj in v.iter().filter(|vj| agree(vj, &v[reference])) {
+            let [x, sigma] = vj[c];
+            if sigma.is_finite() && sigma > 0.0 {
+                let w = 1.0 / (sigma * sigma);
+                num += w * x;
+                den += w;
+            }
+        }
+        if den > 0.0 {
+            o[c] = fast_exp2(num / den);
+        }
+    }
 }
 
 /// `v` with exactly `n` elements, for the merge to overwrite. A buffer of another size is
