@@ -501,7 +501,7 @@ fn consistency_band<T: Code, const N: usize>(
 ) -> (usize, usize) {
     let p = srcs.len();
     let (mut tested, mut flagged) = (0usize, 0usize);
-    let mut v = vec![[[0f32; 2]; 3]; p];
+    let mut v: Vec<Vote> = vec![[[0f32; 2]; 3]; p];
     for (k, (o, fl)) in out.chunks_exact_mut(3).zip(flags.iter_mut()).enumerate() {
         let i = 3 * (start + k);
         // Best-exposed frame: largest total precision over the three channels.
@@ -526,15 +526,6 @@ fn consistency_band<T: Code, const N: usize>(
             continue;
         }
         tested += 1;
-        // Two frames agree when every channel both can judge lies within the noise.
-        let agree = |a: &[[f32; 2]; 3], b: &[[f32; 2]; 3]| {
-            (0..3).all(|c| {
-                let (a, b) = (a[c], b[c]);
-                !(a[1].is_finite() && b[1].is_finite())
-                    || (a[0] - b[0]).abs()
-                        <= CONSISTENCY_SIGMAS * (a[1] * a[1] + b[1] * b[1]).sqrt()
-            })
-        };
         let bad = v
             .iter()
             .enumerate()
@@ -543,11 +534,23 @@ fn consistency_band<T: Code, const N: usize>(
         if bad {
             flagged += 1;
             if ghosts {
-                ghost_free(&v, best, &agree, o);
+                ghost_free(&v, best, o);
             }
         }
     }
     (tested, flagged)
+}
+
+/// One frame's votes for a pixel: per channel `[log2 E, σ]` (σ infinite: no vote).
+type Vote = [[f32; 2]; 3];
+
+/// Two frames agree when every channel both can judge lies within the noise.
+fn agree(a: &Vote, b: &Vote) -> bool {
+    (0..3).all(|c| {
+        let (a, b) = (a[c], b[c]);
+        !(a[1].is_finite() && b[1].is_finite())
+            || (a[0] - b[0]).abs() <= CONSISTENCY_SIGMAS * (a[1] * a[1] + b[1] * b[1]).sqrt()
+    })
 }
 
 /// The ghost-aware value of a pixel whose frames disagree: the reference is the frame that
@@ -555,13 +558,8 @@ fn consistency_band<T: Code, const N: usize>(
 /// best-exposed frame `best`; the value is the precision-weighted mean of the log votes of the
 /// frames that agree with the reference. (Trusting the best-exposed frame alone kept the moved
 /// content whenever the frame that saw it was the best exposed: twice the plain merge's error.)
-fn ghost_free(
-    v: &[[[f32; 2]; 3]],
-    best: usize,
-    agree: &dyn Fn(&[[f32; 2]; 3], &[[f32; 2]; 3]) -> bool,
-    o: &mut [f32],
-) {
-    let usable = |x: &[[f32; 2]; 3]| x.iter().any(|c| c[1].is_finite());
+fn ghost_free(v: &[Vote], best: usize, o: &mut [f32]) {
+    let usable = |x: &Vote| x.iter().any(|c| c[1].is_finite());
     let support = |j: usize| {
         v.iter()
             .enumerate()
