@@ -439,6 +439,11 @@ impl<const N: usize> Votes<N> {
                 let var = model.log_variance(response, c, z) / fade;
                 let m = CONSISTENCY_MODEL_STOPS as f64;
                 *v = (var * l2 * l2 + m * m).sqrt();
+                // Near the top a code may be a clipped value that JPEG ringing pulled below
+                // 255: only a lower bound on the light (marked by a negative deviation).
+                if z >= LOWER_BOUND_CODE {
+                    *v = -*v;
+                }
             }
         }
         let mut flat = Vec::with_capacity(lt.len() * 3 * N);
@@ -541,15 +546,30 @@ fn consistency_band<T: Code, const N: usize>(
     (tested, flagged)
 }
 
-/// One frame's votes for a pixel: per channel `[log2 E, σ]` (σ infinite: no vote).
+/// One frame's votes for a pixel: per channel `[log2 E, σ]` (σ infinite: no vote; σ negative:
+/// the code may be clipped, so the vote is only a lower bound, with deviation `|σ|`).
 type Vote = [[f32; 2]; 3];
 
-/// Two frames agree when every channel both can judge lies within the noise.
+/// Codes from here up vote only a lower bound in the consistency test: the false alarms on
+/// static scenes were almost all pixels whose longest frame read 250..254 where the light had
+/// clipped (JPEG ringing pulls a clipped 255 down by a few codes).
+const LOWER_BOUND_CODE: usize = 250;
+
+/// Two frames agree when every channel both can judge lies within the noise (a lower bound
+/// disagrees only with a vote clearly below it).
 fn agree(a: &Vote, b: &Vote) -> bool {
     (0..3).all(|c| {
         let (a, b) = (a[c], b[c]);
-        !(a[1].is_finite() && b[1].is_finite())
-            || (a[0] - b[0]).abs() <= CONSISTENCY_SIGMAS * (a[1] * a[1] + b[1] * b[1]).sqrt()
+        if !(a[1].is_finite() && b[1].is_finite()) {
+            return true;
+        }
+        let lim = CONSISTENCY_SIGMAS * (a[1] * a[1] + b[1] * b[1]).sqrt();
+        match (a[1] < 0.0, b[1] < 0.0) {
+            (false, false) => (a[0] - b[0]).abs() <= lim,
+            (true, false) => b[0] >= a[0] - lim,
+            (false, true) => a[0] >= b[0] - lim,
+            (true, true) => true,
+        }
     })
 }
 
@@ -577,17 +597,21 @@ fn ghost_free(v: &[Vote], best: usize, o: &mut [f32]) {
         }
     }
     for c in 0..3 {
-        let (mut num, mut den) = (0f32, 0f32);
-        for vj in v.iter().filter(|vj| agree(vj, &v[reference])) {
-            let [x, sigma] = vj[c];
-            if sigma.is_finite() && sigma > 0.0 {
-                let w = 1.0 / (sigma * sigma);
-                num += w * x;
-                den += w;
+        // Proper votes first; lower bounds only when nothing else saw the channel.
+        for bounds in [false, true] {
+            let (mut num, mut den) = (0f32, 0f32);
+            for vj in v.iter().filter(|vj| agree(vj, &v[reference])) {
+                let [x, sigma] = vj[c];
+                if sigma.is_finite() && sigma != 0.0 && (sigma < 0.0) == bounds {
+                    let w = 1.0 / (sigma * sigma);
+                    num += w * x;
+                    den += w;
+                }
             }
-        }
-        if den > 0.0 {
-            o[c] = fast_exp2(num / den);
+            if den > 0.0 {
+                o[c] = fast_exp2(num / den);
+                break;
+            }
         }
     }
 }

@@ -201,9 +201,9 @@ fn moved_content_is_flagged_and_the_ghost_aware_merge_repairs_it() {
         plain.inconsistent_fraction()
     );
     assert!(frac_in > 0.3, "{frac_in}");
-    // Measured 0.027 on this static scene: the test is not yet free of false alarms (see
-    // docs/accuracy.md), so it is an option, not the default.
-    assert!(frac_out < 0.05, "{frac_out}");
+    // Measured 0.0002 on this static scene (0.027 before near-clipped codes voted only lower
+    // bounds: JPEG ringing pulls a clipped 255 down to 250..254).
+    assert!(frac_out < 0.002, "{frac_out}");
     assert!(frac_in > 10.0 * frac_out);
     assert!(plain.inconsistent_fraction() > 0.0);
     // The ghost-aware merge replaces exactly the flagged pixels and nothing else.
@@ -413,6 +413,6 @@ fn the_ghost_aware_merge_keeps_what_most_frames_saw() {
             frames.len()
         );
         assert!(g_in < 0.5 * p_in, "seed {seed}: {g_in} vs {p_in}");
-        assert!(g_out < 1.15 * p_out, "seed {seed}: {g_out} vs {p_out}");
+        assert!(g_out < 1.02 * p_out, "seed {seed}: {g_out} vs {p_out}");
     }
 }
