@@ -59,8 +59,8 @@ pub struct Args {
     /// Align hand-held frames by translation (median threshold bitmaps) before merging.
     #[arg(long)]
     pub align: bool,
-    /// Ghost-aware merge: where frames disagree beyond their noise (moving clouds), take the
-    /// best-exposed frame alone.
+    /// Ghost-aware merge: where frames disagree beyond their noise (moving clouds), keep what
+    /// most frames agree on instead of a blend of two scenes.
     #[arg(long)]
     pub ghosts: bool,
     /// Write where frames disagree beyond their noise as a PNG (white = disagree); the

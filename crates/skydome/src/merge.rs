@@ -144,8 +144,9 @@ pub struct MergeOptions {
     /// [`Merged::inconsistent`] and its counts.
     #[serde(default)]
     pub consistency: bool,
-    /// Ghost-aware merge (implies `consistency`): where frames disagree, take the best-exposed
-    /// frame alone instead of a blend of two scenes.
+    /// Ghost-aware merge (implies `consistency`): where frames disagree, instead of a blend of
+    /// two scenes, the precision-weighted mean of the frames that agree with the frame most
+    /// others agree with (what moved is usually in the minority).
     #[serde(default)]
     pub ghosts: bool,
 }

@@ -315,8 +315,8 @@ pub struct Options {
     /// Test every pixel for frames disagreeing beyond their noise (moving clouds, shifts);
     /// the fraction goes to the report, with a warning above 2 %.
     pub consistency: bool,
-    /// Ghost-aware merge (implies `consistency`): where frames disagree, take the best-exposed
-    /// frame alone.
+    /// Ghost-aware merge (implies `consistency`): where frames disagree, keep what most frames
+    /// agree on (see [`MergeOptions::ghosts`](crate::merge::MergeOptions::ghosts)).
     pub ghosts: bool,
     /// Lens model.
     pub lens: LensSource,
