@@ -267,6 +267,28 @@ pub struct DecodedFrame {
     pub non_srgb_icc: Option<String>,
 }
 
+impl From<Frame> for DecodedFrame {
+    /// The frame as a decoder would hand it over from a file whose EXIF gave its exposure
+    /// (time, ISO, f-number) and no rotation (orientation 1): e.g. a simulated frame
+    /// ([`crate::synth`]) on its way into [`crate::pipeline::run`].
+    fn from(f: Frame) -> Self {
+        DecodedFrame {
+            name: f.name,
+            width: f.width,
+            height: f.height,
+            pixels: f.pixels,
+            exif_time_s: Some(f.exposure.time_s),
+            iso: f.exposure.iso,
+            f_number: f.exposure.f_number,
+            info: CaptureInfo {
+                orientation: 1,
+                ..CaptureInfo::default()
+            },
+            non_srgb_icc: None,
+        }
+    }
+}
+
 /// A validated bracket, sorted by relative exposure (shortest first).
 #[derive(Debug, Clone)]
 pub struct Bracket {

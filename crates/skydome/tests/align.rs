@@ -4,7 +4,7 @@ mod common;
 use common::{data_dir, load_jpegs};
 
 use skydome::align::{align, apply_shifts, AlignOptions, Alignment};
-use skydome::bracket::{Frame, Pixels};
+use skydome::bracket::Frame;
 use skydome::merge::{merge, MergeOptions};
 use skydome::response::{calibrate, CalibrateOptions, Response};
 use skydome::synth::{generate, SynthOptions};
@@ -50,29 +50,11 @@ fn known_synthetic_shifts_are_recovered_exactly() {
     }
 }
 
-/// Per frame, the median over well-exposed pixels of `|log2(E_frame / E_merged)|`.
+/// The worst frame's median `|log2(E_frame / E_merged)|` ([`common::frame_consistency`]).
 fn worst_frame_consistency(frames: &[Frame], r: &Response) -> f64 {
     let m = merge(frames, r, &MergeOptions::default()).unwrap();
-    frames
-        .iter()
-        .map(|f| {
-            let Pixels::U8(v) = &f.pixels else {
-                panic!("8-bit")
-            };
-            let lt = f.exposure.relative().ln();
-            let mut d: Vec<f64> = Vec::new();
-            for p in 0..f.width * f.height {
-                let px = &v[3 * p..3 * p + 3];
-                if px.iter().all(|&z| (20..=235).contains(&z)) {
-                    for (c, &z) in px.iter().enumerate() {
-                        let e = r.curve(c)[z as usize] - lt;
-                        d.push(((e - (m.radiance.data[3 * p + c] as f64).ln()) / 2f64.ln()).abs());
-                    }
-                }
-            }
-            d.sort_by(f64::total_cmp);
-            d[d.len() / 2]
-        })
+    common::frame_consistency(frames, r, &m.radiance)
+        .into_iter()
         .fold(0.0, f64::max)
 }
 

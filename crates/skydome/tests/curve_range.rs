@@ -72,26 +72,9 @@ fn whole_curve_beats_opencv_on_a_sixteen_frame_bracket_with_a_black_level() {
 
 #[test]
 fn the_sixteen_frame_film_bracket_is_not_refused_as_identical() {
-    use skydome::bracket::{assemble, CaptureInfo, DecodedFrame, OrientationPolicy};
+    use skydome::bracket::{assemble, DecodedFrame, OrientationPolicy};
     let b = film(2);
-    let decoded: Vec<DecodedFrame> = b
-        .frames
-        .iter()
-        .map(|f| DecodedFrame {
-            name: f.name.clone(),
-            width: f.width,
-            height: f.height,
-            pixels: f.pixels.clone(),
-            exif_time_s: Some(f.exposure.time_s),
-            iso: None,
-            f_number: None,
-            info: CaptureInfo {
-                orientation: 1,
-                ..Default::default()
-            },
-            non_srgb_icc: None,
-        })
-        .collect();
+    let decoded: Vec<DecodedFrame> = b.frames.iter().cloned().map(DecodedFrame::from).collect();
     let br = assemble(decoded, None, OrientationPolicy::Apply).unwrap();
     println!(
         "{} frames kept; warnings {:?}",

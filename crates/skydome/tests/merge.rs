@@ -257,33 +257,6 @@ fn merge_into_reuses_buffers_and_matches_merge() {
     assert_eq!(m, before);
 }
 
-/// For every frame, the median over its well-exposed pixels (all channels in 20..=235) of
-/// `|log2(E_j / E_merged)|`, where `E_j = exp(g(Z) − ln Δt_j)` is what that frame alone says.
-fn frame_consistency(frames: &[Frame], r: &Response, merged: &skydome::HdrImage) -> Vec<f64> {
-    frames
-        .iter()
-        .map(|f| {
-            let Pixels::U8(v) = &f.pixels else {
-                panic!("8-bit")
-            };
-            let lt = f.exposure.relative().ln();
-            let mut d: Vec<f64> = Vec::new();
-            for p in 0..f.width * f.height {
-                let px = &v[3 * p..3 * p + 3];
-                if px.iter().all(|&z| (20..=235).contains(&z)) {
-                    for (c, &z) in px.iter().enumerate() {
-                        let ej = r.curve(c)[z as usize] - lt;
-                        let em = (merged.data[3 * p + c] as f64).ln();
-                        d.push(((ej - em) / std::f64::consts::LN_2).abs());
-                    }
-                }
-            }
-            d.sort_by(f64::total_cmp);
-            d[d.len() / 2]
-        })
-        .collect()
-}
-
 #[test]
 fn real_brackets_merge_consistently_between_frames() {
     let Some(d) = data_dir() else { return };
@@ -318,7 +291,7 @@ fn real_brackets_merge_consistently_between_frames() {
         let frames = load_jpegs(&d.join(name), &files);
         let cal = calibrate(&frames, None, &CalibrateOptions::default()).unwrap();
         let m = merge(&frames, &cal.response, &MergeOptions::default()).unwrap();
-        let cons = frame_consistency(&frames, &cal.response, &m.radiance);
+        let cons = common::frame_consistency(&frames, &cal.response, &m.radiance);
         println!("{name}: sampling {:?}", cal.report());
         println!("{name}: median |log2(E_frame / E_merged)| per frame: {cons:.3?}");
         assert!(cons.iter().all(|&c| c < limit), "{name}: {cons:?}");
@@ -342,7 +315,7 @@ fn hand_held_bracket_merges_loosely() {
     let cal = calibrate(&frames, None, &CalibrateOptions::default()).unwrap();
     println!("hand-held sampling: {:?}", cal.report());
     let m = merge(&frames, &cal.response, &MergeOptions::default()).unwrap();
-    let cons = frame_consistency(&frames, &cal.response, &m.radiance);
+    let cons = common::frame_consistency(&frames, &cal.response, &m.radiance);
     println!("banterle_alignment: median |log2(E_frame / E_merged)| per frame: {cons:.3?}");
     assert!(cons.iter().all(|&c| c < 0.5), "{cons:?}");
 }

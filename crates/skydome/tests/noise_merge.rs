@@ -150,6 +150,30 @@ fn noise_model_is_estimated_from_the_bracket() {
         .any(|w| w.contains("black in every frame")));
 }
 
+/// Against the truth, log2 RMSE of the worst channel over well-exposed pixels: the plain and
+/// the ghost-aware merge inside the moved block, then both outside it.
+fn ghost_errors(
+    b: &SynthBracket,
+    plain: &HdrImage,
+    ghost: &HdrImage,
+    inside: impl Fn(usize) -> bool,
+) -> [f64; 4] {
+    let well = well_exposed_mask(&b.frames, 10, 245).unwrap();
+    let in_block: Vec<bool> = (0..well.len()).map(|p| inside(p) && well[p]).collect();
+    let outside: Vec<bool> = (0..well.len()).map(|p| !inside(p) && well[p]).collect();
+    let worst = |m: &HdrImage, mask: &[bool]| {
+        log2_rmse_per_channel(m, &b.truth, mask)
+            .into_iter()
+            .fold(0.0f64, f64::max)
+    };
+    [
+        worst(plain, &in_block),
+        worst(ghost, &in_block),
+        worst(plain, &outside),
+        worst(ghost, &outside),
+    ]
+}
+
 /// A "cloud" that moved between exposures: a block of the longest frame is replaced by what
 /// that frame saw 40 pixels away. The consistency test flags the block; the ghost-aware merge
 /// changes only flagged pixels, and against the truth (the scene as the other frames saw it)
@@ -231,22 +255,8 @@ fn moved_content_is_flagged_and_the_ghost_aware_merge_repairs_it() {
 
     // Against the truth (the scene as the other frames saw it): the plain merge blends the
     // moved block into a ghost; the ghost-aware merge keeps what the consistent frames agree on.
-    let well = well_exposed_mask(&b.frames, 10, 245).unwrap();
-    let in_block: Vec<bool> = (0..flags.len()).map(|p| inside(p) && well[p]).collect();
-    let outside: Vec<bool> = (0..flags.len()).map(|p| !inside(p) && well[p]).collect();
-    let worst = |m: &HdrImage, mask: &[bool]| {
-        log2_rmse_per_channel(m, &b.truth, mask)
-            .into_iter()
-            .fold(0.0f64, f64::max)
-    };
-    let (plain_in, ghost_in) = (
-        worst(&plain.radiance, &in_block),
-        worst(&ghost.radiance, &in_block),
-    );
-    let (plain_out, ghost_out) = (
-        worst(&plain.radiance, &outside),
-        worst(&ghost.radiance, &outside),
-    );
+    let [plain_in, ghost_in, plain_out, ghost_out] =
+        ghost_errors(&b, &plain.radiance, &ghost.radiance, inside);
     println!(
         "log2 RMSE, worst channel: moved block plain {plain_in:.3} ghost-aware {ghost_in:.3}; elsewhere plain {plain_out:.4} ghost-aware {ghost_out:.4}"
     );
@@ -259,31 +269,6 @@ fn moved_content_is_flagged_and_the_ghost_aware_merge_repairs_it() {
 /// `E_frame` from OpenCV's own curve. frobisher_001 per frame 0.008 / 0.021 / 0.015;
 /// banterle_room 0.067 / 0.245 / 0.092 / 0.065 / 0.071 / 0.067 / 0.090 (shortest first).
 const OPENCV_WORST_FRAME: [(&str, f64); 2] = [("frobisher_001", 0.021), ("banterle_room", 0.245)];
-
-/// The same measure for skydome's merge.
-fn worst_frame(frames: &[skydome::bracket::Frame], r: &Response, m: &HdrImage) -> Vec<f64> {
-    frames
-        .iter()
-        .map(|f| {
-            let skydome::bracket::Pixels::U8(v) = &f.pixels else {
-                panic!("8-bit")
-            };
-            let lt = f.exposure.relative().ln();
-            let mut d: Vec<f64> = Vec::new();
-            for p in 0..f.width * f.height {
-                let px = &v[3 * p..3 * p + 3];
-                if px.iter().all(|&z| (20..=235).contains(&z)) {
-                    for (c, &z) in px.iter().enumerate() {
-                        let e = r.curve(c)[z as usize] - lt;
-                        d.push(((e - (m.data[3 * p + c] as f64).ln()) / 2f64.ln()).abs());
-                    }
-                }
-            }
-            d.sort_by(f64::total_cmp);
-            d[d.len() / 2]
-        })
-        .collect()
-}
 
 #[test]
 fn real_sets_agree_between_frames_better_than_opencv_with_the_default_weights() {
@@ -340,7 +325,7 @@ fn real_sets_agree_between_frames_better_than_opencv_with_the_default_weights() 
                 },
             )
             .unwrap();
-            let per = worst_frame(&frames, &cal.response, &m.radiance);
+            let per = common::frame_consistency(&frames, &cal.response, &m.radiance);
             let worst = per.iter().copied().fold(0.0, f64::max);
             println!("{name} {w:?}: per frame {per:.3?}, worst {worst:.3} (OpenCV {opencv:.3})");
             // The default (hat) beats OpenCV on both sets. The noise weights do on frobisher
@@ -385,14 +370,6 @@ fn the_ghost_aware_merge_keeps_what_most_frames_saw() {
             }
         }
         let inside = |p: usize| (x0..x1).contains(&(p % 256)) && (y0..y1).contains(&(p / 256));
-        let well = well_exposed_mask(&b.frames, 10, 245).unwrap();
-        let in_block: Vec<bool> = (0..well.len()).map(|p| inside(p) && well[p]).collect();
-        let outside: Vec<bool> = (0..well.len()).map(|p| !inside(p) && well[p]).collect();
-        let worst = |m: &HdrImage, mask: &[bool]| {
-            log2_rmse_per_channel(m, &b.truth, mask)
-                .into_iter()
-                .fold(0.0f64, f64::max)
-        };
         let plain = merge(&frames, &r, &MergeOptions::default())
             .unwrap()
             .radiance;
@@ -406,8 +383,7 @@ fn the_ghost_aware_merge_keeps_what_most_frames_saw() {
         )
         .unwrap()
         .radiance;
-        let (p_in, g_in) = (worst(&plain, &in_block), worst(&ghost, &in_block));
-        let (p_out, g_out) = (worst(&plain, &outside), worst(&ghost, &outside));
+        let [p_in, g_in, p_out, g_out] = ghost_errors(&b, &plain, &ghost, inside);
         println!(
             "seed {seed}, {} frames, frame {moved} moved: block plain {p_in:.3} ghost-aware {g_in:.3}; elsewhere {p_out:.4} / {g_out:.4}",
             frames.len()

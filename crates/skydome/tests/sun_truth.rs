@@ -13,7 +13,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use skydome::bracket::{CaptureInfo, DecodedFrame};
+use skydome::bracket::DecodedFrame;
 use skydome::fisheye::{LensKind, LensProfile, Vignetting};
 use skydome::image::{Circle, HdrImage, PixelPoint};
 use skydome::photometry::{Reference, SpotLuminance};
@@ -210,17 +210,7 @@ fn photograph(r: &Rendered) -> Vec<DecodedFrame> {
     synth::photograph(&seen, &opts)
         .expect("photograph")
         .into_iter()
-        .map(|f| DecodedFrame {
-            name: f.name,
-            width: f.width,
-            height: f.height,
-            pixels: f.pixels,
-            exif_time_s: Some(f.exposure.time_s),
-            iso: None,
-            f_number: None,
-            info: CaptureInfo::default(),
-            non_srgb_icc: None,
-        })
+        .map(DecodedFrame::from)
         .collect()
 }
 

@@ -130,7 +130,6 @@ fn ring_medians(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bracket::CaptureInfo;
     use crate::fisheye::{LensKind, Vignetting};
     use crate::image::{Circle, HdrImage};
     use crate::synth::{photograph, SynthOptions};
@@ -156,18 +155,10 @@ mod tests {
             seed,
             ..SynthOptions::default()
         };
-        let f = photograph(&truth, &opts).expect("photograph").remove(0);
-        DecodedFrame {
-            name: f.name,
-            width: f.width,
-            height: f.height,
-            pixels: f.pixels,
-            exif_time_s: None,
-            iso: None,
-            f_number: None,
-            info: CaptureInfo::default(),
-            non_srgb_icc: None,
-        }
+        photograph(&truth, &opts)
+            .expect("photograph")
+            .remove(0)
+            .into()
     }
 
     #[test]

@@ -615,18 +615,7 @@ where
             T::store(&mut orow[i..i + 3], v);
         }
     };
-    #[cfg(feature = "parallel")]
-    out.data
-        .par_chunks_mut(3 * w)
-        .zip(img.data.par_chunks(3 * w))
-        .enumerate()
-        .for_each(row_fn);
-    #[cfg(not(feature = "parallel"))]
-    out.data
-        .chunks_mut(3 * w)
-        .zip(img.data.chunks(3 * w))
-        .enumerate()
-        .for_each(row_fn);
+    for_each_row(&mut out.data, &img.data, w, row_fn);
     Ok(out)
 }
 
@@ -727,18 +716,7 @@ pub fn tonemap_u8(img: &HdrImage, tm: &ToneMap) -> Result<RgbImage<u8>, TonemapE
             }),
         }
     };
-    #[cfg(feature = "parallel")]
-    out.data
-        .par_chunks_mut(3 * w)
-        .zip(img.data.par_chunks(3 * w))
-        .enumerate()
-        .for_each(row_fn);
-    #[cfg(not(feature = "parallel"))]
-    out.data
-        .chunks_mut(3 * w)
-        .zip(img.data.chunks(3 * w))
-        .enumerate()
-        .for_each(row_fn);
+    for_each_row(&mut out.data, &img.data, w, row_fn);
     Ok(out)
 }
 
@@ -884,6 +862,25 @@ pub fn tonemap_u16(img: &HdrImage, tm: &ToneMap) -> Result<RgbImage<u16>, Tonema
             .map(rgb)
             .map(|v| (srgb_fast(lut, v) * 65535.0).round() as u16)
     })
+}
+
+/// Calls `row_fn((y, (output row, input row)))` for every row of `w` RGB pixels, rows in
+/// parallel with the `parallel` feature.
+fn for_each_row<T, F>(out: &mut [T], input: &[f32], w: usize, row_fn: F)
+where
+    T: Send,
+    F: Fn((usize, (&mut [T], &[f32]))) + Sync + Send,
+{
+    #[cfg(feature = "parallel")]
+    out.par_chunks_mut(3 * w)
+        .zip(input.par_chunks(3 * w))
+        .enumerate()
+        .for_each(row_fn);
+    #[cfg(not(feature = "parallel"))]
+    out.chunks_mut(3 * w)
+        .zip(input.chunks(3 * w))
+        .enumerate()
+        .for_each(row_fn);
 }
 
 #[cfg(test)]

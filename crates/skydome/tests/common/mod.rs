@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use skydome::bracket::{Exposure, Frame, Pixels};
+use skydome::response::Response;
 
 /// `../shared/data` beside the repository, or `None` (with a message) in a fresh clone; a
 /// failure instead when `SKYDOME_REQUIRE_SHARED_DATA=1` (CI).
@@ -74,4 +75,32 @@ pub fn radiance_tools() -> Option<(PathBuf, PathBuf)> {
             None
         }
     }
+}
+
+/// For every frame, the median over its well-exposed pixels (all channels in 20..=235) of
+/// `|log2(E_j / E_merged)|`, where `E_j = exp(g(Z) − ln Δt_j)` is what that frame alone says
+/// (8-bit frames): how well a merge agrees with each of its frames.
+pub fn frame_consistency(frames: &[Frame], r: &Response, merged: &skydome::HdrImage) -> Vec<f64> {
+    frames
+        .iter()
+        .map(|f| {
+            let Pixels::U8(v) = &f.pixels else {
+                panic!("8-bit")
+            };
+            let lt = f.exposure.relative().ln();
+            let mut d: Vec<f64> = Vec::new();
+            for p in 0..f.width * f.height {
+                let px = &v[3 * p..3 * p + 3];
+                if px.iter().all(|&z| (20..=235).contains(&z)) {
+                    for (c, &z) in px.iter().enumerate() {
+                        let ej = r.curve(c)[z as usize] - lt;
+                        let em = (merged.data[3 * p + c] as f64).ln();
+                        d.push(((ej - em) / std::f64::consts::LN_2).abs());
+                    }
+                }
+            }
+            d.sort_by(f64::total_cmp);
+            d[d.len() / 2]
+        })
+        .collect()
 }
