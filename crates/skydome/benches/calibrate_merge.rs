@@ -137,6 +137,15 @@ fn merging(c: &mut Criterion) {
     g.bench_function("lut_into_with_confidence_and_mask", |b| {
         b.iter(|| merge_into(black_box(&frames), &r, &o, &mut mc).unwrap())
     });
+    // The noise-aware merge: the hat pass, the noise model's estimate and the refinement.
+    let on = MergeOptions {
+        weighting: skydome::merge::Weighting::Noise,
+        ..Default::default()
+    };
+    let mut mn = merge(&frames, &r, &on).unwrap();
+    g.bench_function("noise_into", |b| {
+        b.iter(|| merge_into(black_box(&frames), &r, &on, &mut mn).unwrap())
+    });
     g.bench_function("naive", |b| {
         b.iter(|| naive(black_box(&frames), &r, &mut out))
     });

@@ -80,9 +80,6 @@ const ROWS_PER_BAND: usize = 16;
 const W_MAX: f32 = 127.0;
 /// Floor weight of the shortest frame: keeps `Σ w > 0` without moving any real result.
 const W_FLOOR: f32 = 1e-6;
-/// Floor weight of the longest frame at codes below mid-grey under [`Weighting::Noise`]: a pixel
-/// black in every frame takes the longest frame's value (the tightest upper bound).
-const W_FLOOR_LONG: f32 = 1e-4;
 
 /// Errors from merging; each message says what to change.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -309,26 +306,13 @@ pub fn merge_into(
         },
         _ => noise::estimate(frames, response, opts.black_level, None),
     });
-    let noise_w: Option<[[f64; LEVELS]; 3]> = noise_est
-        .as_ref()
-        .map(|e| [0, 1, 2].map(|c| e.model.weights(response, c, opts.black_level)));
     let p = frames.len();
-    let weighting = opts.weighting;
-    let wfn = |j: usize, c: usize, z: f32| -> f32 {
-        match (weighting, &noise_w) {
-            (Weighting::Noise, Some(nw)) => {
-                let mut w = interp(&nw[c], z) as f32;
-                if j == 0 {
-                    w = w.max(W_FLOOR);
-                }
-                if j + 1 == p && z <= 127.5 {
-                    w = w.max(W_FLOOR_LONG);
-                }
-                w
-            }
-            _ => weight(z, j, p, weighting),
-        }
+    // The noise-aware merge starts from the hat's estimate and refines it (see [`Refine`]).
+    let first_pass = match opts.weighting {
+        Weighting::Noise => Weighting::Hat,
+        other => other,
     };
+    let wfn = |j: usize, _c: usize, z: f32| weight(z, j, p, first_pass);
     out.radiance.width = w;
     out.radiance.height = h;
     let data = sized(&mut out.radiance.data, n);
@@ -366,9 +350,19 @@ pub fn merge_into(
             let g = |c: usize, v: usize| response.g16(c, v as u16);
             let luts = Tables::<65536>::new(&lt, wfn, g);
             let counts = run_bands(&srcs, &luts, w, black16, data, conf, clip);
+            if let (Weighting::Noise, Some(e)) = (opts.weighting, &noise_est) {
+                let r = Refine::<65536>::new(&lt, response, &e.model, opts.black_level, g);
+                refine(&srcs, &r, w, data);
+            }
             let (t, f) = match &noise_est {
                 Some(e) if check => {
-                    let votes = Votes::<65536>::new(&lt, response, &e.model, opts.black_level, g);
+                    let votes = Votes::<65536>::new(
+                        &lt,
+                        response,
+                        &e.model.upper_bound(),
+                        opts.black_level,
+                        g,
+                    );
                     consistency(&srcs, &votes, w, data, &mut flags, opts.ghosts)
                 }
                 _ => (0, 0),
@@ -386,9 +380,19 @@ pub fn merge_into(
             let g = |c: usize, z: usize| response.curve(c)[z];
             let luts = Tables::<LEVELS>::new(&lt, wfn, g);
             let counts = run_bands(&srcs, &luts, w, opts.black_level, data, conf, clip);
+            if let (Weighting::Noise, Some(e)) = (opts.weighting, &noise_est) {
+                let r = Refine::<LEVELS>::new(&lt, response, &e.model, opts.black_level, g);
+                refine(&srcs, &r, w, data);
+            }
             let (t, f) = match &noise_est {
                 Some(e) if check => {
-                    let votes = Votes::<LEVELS>::new(&lt, response, &e.model, opts.black_level, g);
+                    let votes = Votes::<LEVELS>::new(
+                        &lt,
+                        response,
+                        &e.model.upper_bound(),
+                        opts.black_level,
+                        g,
+                    );
                     consistency(&srcs, &votes, w, data, &mut flags, opts.ghosts)
                 }
                 _ => (0, 0),
@@ -404,13 +408,179 @@ pub fn merge_into(
     Ok(())
 }
 
-/// Linear interpolation of a 256-entry table at a continuous code.
-#[inline]
-fn interp(t: &[f64; LEVELS], z: f32) -> f64 {
-    let z = (z as f64).clamp(0.0, 255.0);
-    let z0 = (z.floor() as usize).min(LEVELS - 2);
-    let f = z - z0 as f64;
-    t[z0] * (1.0 - f) + t[z0 + 1] * f
+/// Bins per stop of the expected-code weight tables of [`Refine`].
+const EXPECTED_BINS_PER_STOP: f32 = 32.0;
+
+/// The second pass of the noise-aware merge ([`Weighting::Noise`]).
+///
+/// A vote's variance is that of the code the frame *should* read for the pixel's light, not of
+/// the code it happened to read: weighting by the observed code lets each frame's own noise
+/// choose its weight (a vote that came out high also came out more trusted), which biases the
+/// mean and, measured against the truth, lost to the hat on the well-exposed sky. So the hat
+/// merge gives a first estimate `log2 E₀`; frame `j` is then expected at
+/// `g(z*) = ln E₀ + ln Δt_j`, and its vote gets the weight `1 / σ²(z*)` of the noise model
+/// (Granados et al. 2010 use the same two-pass scheme), zero where `z*` is within
+/// [`LOWER_BOUND_CODE`] of clipping, times a factor of the observed code: zero at the black
+/// level and at full scale, fading over the top [`noise::TOP_FADE`] codes. A pixel no frame
+/// can vote for keeps the hat's value (clipped suns, pixels black in every frame).
+struct Refine<const N: usize> {
+    /// Frame-major, then channel, then code: `[log2 E_j, observed-code factor]`.
+    votes: Vec<[f32; 2]>,
+    /// `ln Δt_j · log2 e · EXPECTED_BINS_PER_STOP`: frame j's offset in bins.
+    shift: Vec<f32>,
+    /// Per channel: `g · log2 e` of the first bin of `weights`.
+    lo: [f32; 3],
+    /// Per channel: the weight at expected `g · log2 e = lo + k / EXPECTED_BINS_PER_STOP`,
+    /// ending in a zero bin (expected beyond the usable codes).
+    weights: [Vec<f32>; 3],
+}
+
+impl<const N: usize> Refine<N> {
+    /// The weight of a vote expected `bin` bins above `lo[c]` in channel `c`.
+    #[inline(always)]
+    fn weight(&self, c: usize, bin: f32) -> f32 {
+        let t = self.weights[c].as_slice();
+        t[(bin.max(0.0) as usize).min(t.len() - 1)]
+    }
+
+    fn new(
+        lt: &[f64],
+        response: &Response,
+        model: &NoiseModel,
+        black: u8,
+        g: impl Fn(usize, usize) -> f64,
+    ) -> Self {
+        let l2 = std::f64::consts::LOG2_E;
+        let scale = 255.0 / (N - 1) as f64;
+        let mut votes = Vec::with_capacity(lt.len() * 3 * N);
+        for &l in lt {
+            for c in 0..3 {
+                votes.extend((0..N).map(|v| {
+                    let z = v as f64 * scale;
+                    let usable = z > black as f64 + 0.5 * scale && v + 1 < N;
+                    let fade = ((255.0 - z) / noise::TOP_FADE).clamp(0.0, 1.0);
+                    let f = if usable { fade } else { 0.0 };
+                    [((g(c, v) - l) * l2) as f32, f as f32]
+                }));
+            }
+        }
+        let mut lo = [0f32; 3];
+        let weights = [0, 1, 2].map(|c| {
+            let curve = response.curve(c);
+            let y: Vec<f64> = curve.iter().map(|v| v * l2).collect();
+            let var: Vec<f64> = (0..LEVELS)
+                .map(|z| model.log_variance(response, c, z))
+                .collect();
+            let first = black as usize + 1;
+            let top = LOWER_BOUND_CODE;
+            lo[c] = y[first] as f32;
+            let bins = (((y[top] - y[first]) * EXPECTED_BINS_PER_STOP as f64).ceil() as usize)
+                .clamp(1, 1 << 16);
+            let mut w: Vec<f32> = (0..bins)
+                .map(|k| {
+                    let target = y[first] + k as f64 / EXPECTED_BINS_PER_STOP as f64;
+                    // The continuous code where the curve reaches `target` (nondecreasing).
+                    let i = first + y[first..=top].partition_point(|&v| v < target);
+                    let i = i.clamp(first + 1, top);
+                    let (a, b) = (y[i - 1], y[i]);
+                    let f = if b > a {
+                        ((target - a) / (b - a)).clamp(0.0, 1.0)
+                    } else {
+                        1.0
+                    };
+                    let v = var[i - 1] * (1.0 - f) + var[i] * f;
+                    if v.is_finite() && v > 0.0 {
+                        (1.0 / v) as f32
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            w.push(0.0);
+            w
+        });
+        Self {
+            votes,
+            shift: lt
+                .iter()
+                .map(|l| (l * l2) as f32 * EXPECTED_BINS_PER_STOP)
+                .collect(),
+            lo,
+            weights,
+        }
+    }
+}
+
+/// Runs [`Refine`] over the hat's estimate in `out` (in parallel with the `parallel` feature).
+fn refine<T: Code, const N: usize>(srcs: &[&[T]], r: &Refine<N>, w: usize, out: &mut [f32]) {
+    let band = (3 * ROWS_PER_BAND * w).max(1);
+    let work = |(k, o): (usize, &mut [f32])| refine_band(srcs, r, k * band, o);
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        out.par_chunks_mut(band).enumerate().for_each(work);
+    }
+    #[cfg(not(feature = "parallel"))]
+    out.chunks_mut(band).enumerate().for_each(work);
+}
+
+fn refine_band<T: Code, const N: usize>(
+    srcs: &[&[T]],
+    r: &Refine<N>,
+    start: usize,
+    out: &mut [f32],
+) {
+    // Eight pixels at a time (a multiple of three samples, so the channel of each lane is
+    // fixed): the look-ups are scalar, the arithmetic around them vectorises.
+    const LANES: usize = 24;
+    let (tables, _) = r.votes.as_chunks::<N>();
+    let lo: [f32; LANES] = std::array::from_fn(|s| r.lo[s % 3]);
+    let mut blocks = out.chunks_exact_mut(LANES);
+    let mut i = start;
+    for o in blocks.by_ref() {
+        let o: &mut [f32; LANES] = o.try_into().unwrap_or_else(|_| unreachable!());
+        let mut base = [0f32; LANES];
+        for s in 0..LANES {
+            base[s] = (fast_log2(o[s]) - lo[s]) * EXPECTED_BINS_PER_STOP;
+        }
+        let (mut num, mut den) = ([0f32; LANES], [0f32; LANES]);
+        for (j, (src, shift)) in srcs.iter().zip(&r.shift).enumerate() {
+            let src = &src[i..i + LANES];
+            for s in 0..LANES {
+                let c = s % 3;
+                let [vote, f] = tables[j * 3 + c][src[s].index()];
+                let w = f * r.weight(c, base[s] + shift);
+                num[s] += w * vote;
+                den[s] += w;
+            }
+        }
+        for s in 0..LANES {
+            let e0 = o[s];
+            let v = fast_exp2(num[s] / den[s]);
+            o[s] = if den[s] > 0.0 && e0 > 0.0 && e0.is_finite() {
+                v
+            } else {
+                e0
+            };
+        }
+        i += LANES;
+    }
+    for (k, o) in blocks.into_remainder().iter_mut().enumerate() {
+        let i = i + k;
+        let c = i % 3;
+        let e0 = *o;
+        let base = (fast_log2(e0) - r.lo[c]) * EXPECTED_BINS_PER_STOP;
+        let (mut num, mut den) = (0f32, 0f32);
+        for (j, (src, shift)) in srcs.iter().zip(&r.shift).enumerate() {
+            let [vote, f] = tables[j * 3 + c][src[i].index()];
+            let w = f * r.weight(c, base + shift);
+            num += w * vote;
+            den += w;
+        }
+        if den > 0.0 && e0 > 0.0 && e0.is_finite() {
+            *o = fast_exp2(num / den);
+        }
+    }
 }
 
 /// Per frame, channel and code: the vote `log2 E_j` and its standard deviation in stops
@@ -1003,6 +1173,23 @@ fn pixel_flags(ext: &[u8], mut mask: Option<&mut [u8]>, out: &mut [f32]) -> (usi
     (high as usize, low as usize, blk as usize)
 }
 
+/// `log2 x` in f32 for positive finite `x`, branch-free: the exponent from the bits and
+/// `log2 m` of the mantissa `m ∈ [1, 2)` by a degree-5 polynomial (least squares on Chebyshev
+/// points); absolute error below 1e-5 (ample for [`Refine`]'s 1/32-stop bins). Zero, negative or non-finite `x` give garbage the
+/// caller must not use.
+#[inline(always)]
+fn fast_log2(x: f32) -> f32 {
+    let bits = x.to_bits();
+    let e = ((bits >> 23) & 0xff) as i32 - 127;
+    let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000) - 1.0;
+    let p = m
+        * (1.442_534_8
+            + m * (-0.718_033_4
+                + m * (0.457_157_13
+                    + m * (-0.277_339_43 + m * (0.121_470_73 + m * -0.025_791_527)))));
+    e as f32 + p
+}
+
 /// `2^x` in f32, branch-free so loops over it vectorise: `x` is clamped to ±126, split by
 /// round-to-nearest into `k + f` with `|f| ≤ ½`, and `2^f` is a degree-5 polynomial fitted for
 /// minimum relative error on `[−½, ½]`. Relative error below 3e-7.
@@ -1022,6 +1209,17 @@ pub fn fast_exp2(x: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fast_log2_matches_std_log2() {
+        let mut worst = 0f32;
+        let mut x = 1e-30f32;
+        while x < 1e30 {
+            worst = worst.max((fast_log2(x) - x.log2()).abs());
+            x *= 1.000_37;
+        }
+        assert!(worst < 1e-5, "{worst}");
+    }
 
     #[test]
     fn fast_exp2_matches_std_exp2() {

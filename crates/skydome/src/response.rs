@@ -132,8 +132,12 @@ pub enum Weighting {
     #[default]
     Hat,
     /// Inverse variance of each vote under a camera noise model (shot, read, quantisation and
-    /// JPEG noise; see [`crate::noise`]): a longer exposure, which collected more light, counts
-    /// for more. Zero at the black level and 255, fading to zero over the top codes.
+    /// JPEG noise; see [`crate::noise`]), evaluated at the code the frame is *expected* to read
+    /// given the hat's first estimate (two passes, as Granados et al. 2010): a longer exposure,
+    /// which collected more light, counts for more. Zero at the black level and 255, fading to
+    /// zero over the top codes; a frame expected within 5 codes of clipping gets no weight. On
+    /// phone-like brackets about 30 % less error than the hat on the sky, at about 5× the hat's
+    /// merge time (6 MP: 130 ms against 23 ms on 2 cores).
     Noise,
 }
 

@@ -179,10 +179,21 @@ fn sixteen_bit_frames_merge_like_their_8_bit_originals() {
             }
         })
         .collect();
-    let a = merge(&b.frames, &cal.response, &Default::default()).unwrap();
-    let c = merge(&f16, &cal.response, &Default::default()).unwrap();
-    for (x, y) in a.radiance.data.iter().zip(&c.radiance.data) {
-        assert!((x - y).abs() <= 1e-5 * x.abs().max(1e-6), "{x} vs {y}");
+    // The hat, and the noise-aware merge (its own 16-bit tables) with one fixed noise model.
+    for (weighting, tol) in [(Weighting::Hat, 1e-5), (Weighting::Noise, 1e-4)] {
+        let o = MergeOptions {
+            weighting,
+            noise: Some(skydome::noise::NoiseModel::default()),
+            ..Default::default()
+        };
+        let a = merge(&b.frames, &cal.response, &o).unwrap();
+        let c = merge(&f16, &cal.response, &o).unwrap();
+        for (x, y) in a.radiance.data.iter().zip(&c.radiance.data) {
+            assert!(
+                (x - y).abs() <= tol * x.abs().max(1e-6),
+                "{weighting:?}: {x} vs {y}"
+            );
+        }
     }
 }
 
