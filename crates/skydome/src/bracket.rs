@@ -35,6 +35,21 @@ pub enum Pixels {
 }
 
 impl Pixels {
+    /// Keeps the first `len` samples and gives the rest of the buffer back to the allocator
+    /// (with glibc, a large buffer shrinks in place and the freed pages leave the process).
+    pub(crate) fn release_from(&mut self, len: usize) {
+        match self {
+            Pixels::U8(v) => {
+                v.truncate(len);
+                v.shrink_to_fit();
+            }
+            Pixels::U16(v) => {
+                v.truncate(len);
+                v.shrink_to_fit();
+            }
+        }
+    }
+
     /// Bits per channel (8 or 16).
     pub fn bit_depth(&self) -> u32 {
         match self {

@@ -235,7 +235,58 @@ pub fn merge(
     response: &Response,
     opts: &MergeOptions,
 ) -> Result<Merged, MergeError> {
-    let mut m = Merged {
+    let mut m = merge_empty();
+    merge_into(frames, response, opts, &mut m)?;
+    Ok(m)
+}
+
+/// Bands of rows [`merge_releasing`] merges before giving their frame rows back.
+const RELEASE_BANDS: usize = 8;
+
+/// As [`merge`] for a caller that no longer needs the frames' pixels (the pipeline, after
+/// calibration): the rows are merged from the bottom up in [`RELEASE_BANDS`] bands, and after
+/// each band the frames' rows below it are given back, so the frames and the radiance are never
+/// both whole in memory — 9 × 12 MP peaks at about the frames' size (324 MB) instead of frames
+/// plus radiance (468 MB). Afterwards every frame's pixel buffer is empty (its size, name and
+/// exposure are kept). The noise-aware merge and the consistency test need every frame after
+/// the first pass, so with them the frames are merged whole and emptied at the end.
+pub fn merge_releasing(
+    frames: &mut [Frame],
+    response: &Response,
+    opts: &MergeOptions,
+) -> Result<Merged, MergeError> {
+    let mut m = merge_empty();
+    let whole = opts.weighting == Weighting::Noise || opts.consistency || opts.ghosts;
+    if whole {
+        merge_into(frames, response, opts, &mut m)?;
+    } else {
+        merge_impl(Source::Releasing(frames), response, opts, &mut m)?;
+    }
+    for f in frames.iter_mut() {
+        f.pixels.release_from(0);
+    }
+    Ok(m)
+}
+
+/// The frames a merge reads: shared, or owned by a caller that lets the merge give their rows
+/// back as it goes ([`merge_releasing`]).
+enum Source<'a> {
+    Shared(&'a [Frame]),
+    Releasing(&'a mut [Frame]),
+}
+
+impl Source<'_> {
+    fn frames(&self) -> &[Frame] {
+        match self {
+            Source::Shared(f) => f,
+            Source::Releasing(f) => f,
+        }
+    }
+}
+
+/// An empty [`Merged`] for [`merge_into`] to fill.
+fn merge_empty() -> Merged {
+    Merged {
         radiance: HdrImage {
             width: 0,
             height: 0,
@@ -250,9 +301,7 @@ pub fn merge(
         inconsistent: None,
         inconsistent_pixels: 0,
         tested_pixels: 0,
-    };
-    merge_into(frames, response, opts, &mut m)?;
-    Ok(m)
+    }
 }
 
 /// As [`merge`], into `out`, reusing its buffers: when the size is unchanged nothing is
@@ -265,6 +314,16 @@ pub fn merge_into(
     opts: &MergeOptions,
     out: &mut Merged,
 ) -> Result<(), MergeError> {
+    merge_impl(Source::Shared(frames), response, opts, out)
+}
+
+fn merge_impl(
+    mut source: Source<'_>,
+    response: &Response,
+    opts: &MergeOptions,
+    out: &mut Merged,
+) -> Result<(), MergeError> {
+    let frames = source.frames();
     let first = frames.first().ok_or(MergeError::NoFrames)?;
     let (w, h, bits) = (first.width, first.height, first.pixels.bit_depth());
     let n = w
@@ -340,15 +399,25 @@ pub fn merge_into(
     };
     let (counts, tested, flagged) = match bits {
         16 => {
-            let srcs: Vec<&[u16]> = frames
+            let g = |c: usize, v: usize| response.g16(c, v as u16);
+            let luts = Tables::<65536>::new(&lt, wfn, g);
+            if let Source::Releasing(frames) = &mut source {
+                let counts = run_releasing(frames, &luts, w, black16, data, conf, clip);
+                (out.clipped_high, out.clipped_low, out.black_pixels) = counts;
+                out.noise = None;
+                out.tested_pixels = 0;
+                out.inconsistent_pixels = 0;
+                out.inconsistent = None;
+                return Ok(());
+            }
+            let srcs: Vec<&[u16]> = source
+                .frames()
                 .iter()
                 .filter_map(|f| match &f.pixels {
                     Pixels::U16(v) => Some(v.as_slice()),
                     Pixels::U8(_) => None,
                 })
                 .collect();
-            let g = |c: usize, v: usize| response.g16(c, v as u16);
-            let luts = Tables::<65536>::new(&lt, wfn, g);
             let counts = run_bands(&srcs, &luts, w, black16, data, conf, clip);
             if let (Weighting::Noise, Some(e)) = (opts.weighting, &noise_est) {
                 let r = Refine::<65536>::new(&lt, response, &e.model, opts.black_level, g);
@@ -370,15 +439,25 @@ pub fn merge_into(
             (counts, t, f)
         }
         _ => {
-            let srcs: Vec<&[u8]> = frames
+            let g = |c: usize, z: usize| response.curve(c)[z];
+            let luts = Tables::<LEVELS>::new(&lt, wfn, g);
+            if let Source::Releasing(frames) = &mut source {
+                let counts = run_releasing(frames, &luts, w, opts.black_level, data, conf, clip);
+                (out.clipped_high, out.clipped_low, out.black_pixels) = counts;
+                out.noise = None;
+                out.tested_pixels = 0;
+                out.inconsistent_pixels = 0;
+                out.inconsistent = None;
+                return Ok(());
+            }
+            let srcs: Vec<&[u8]> = source
+                .frames()
                 .iter()
                 .filter_map(|f| match &f.pixels {
                     Pixels::U8(v) => Some(v.as_slice()),
                     Pixels::U16(_) => None,
                 })
                 .collect();
-            let g = |c: usize, z: usize| response.curve(c)[z];
-            let luts = Tables::<LEVELS>::new(&lt, wfn, g);
             let counts = run_bands(&srcs, &luts, w, opts.black_level, data, conf, clip);
             if let (Weighting::Noise, Some(e)) = (opts.weighting, &noise_est) {
                 let r = Refine::<LEVELS>::new(&lt, response, &e.model, opts.black_level, g);
@@ -876,6 +955,8 @@ trait Code: Copy + Sync + PartialOrd {
     fn index(self) -> usize;
     /// The hat `min(v, MAX − v)` in this type's units (`257 ×` the 8-bit hat for 16-bit input).
     fn hat_units(self) -> u32;
+    /// The samples of `p` when they are of this type.
+    fn samples(p: &Pixels) -> Option<&[Self]>;
 }
 
 impl Code for u8 {
@@ -889,6 +970,12 @@ impl Code for u8 {
     fn hat_units(self) -> u32 {
         self.min(u8::MAX - self) as u32
     }
+    fn samples(p: &Pixels) -> Option<&[Self]> {
+        match p {
+            Pixels::U8(v) => Some(v),
+            Pixels::U16(_) => None,
+        }
+    }
 }
 
 impl Code for u16 {
@@ -901,6 +988,12 @@ impl Code for u16 {
     #[inline(always)]
     fn hat_units(self) -> u32 {
         self.min(u16::MAX - self) as u32
+    }
+    fn samples(p: &Pixels) -> Option<&[Self]> {
+        match p {
+            Pixels::U16(v) => Some(v),
+            Pixels::U8(_) => None,
+        }
     }
 }
 
@@ -947,6 +1040,58 @@ fn run_bands<T: Code, const N: usize>(
     }
     #[cfg(not(feature = "parallel"))]
     jobs.into_iter().map(work).fold((0, 0, 0), add)
+}
+
+/// [`run_bands`] over [`RELEASE_BANDS`] bands of rows from the bottom up, giving each band's
+/// frame rows back once it is merged (see [`merge_releasing`]).
+fn run_releasing<T: Code, const N: usize>(
+    frames: &mut [Frame],
+    luts: &Tables<N>,
+    w: usize,
+    black: T,
+    out: &mut [f32],
+    conf: &mut [f32],
+    clip: &mut [u8],
+) -> (usize, usize, usize) {
+    let h = out.len() / (3 * w).max(1);
+    let rows = h.div_ceil(RELEASE_BANDS).max(1);
+    let mut total = (0, 0, 0);
+    for b in (0..h.div_ceil(rows)).rev() {
+        let (r0, r1) = (b * rows, ((b + 1) * rows).min(h));
+        let (s0, s1) = (3 * r0 * w, 3 * r1 * w);
+        let srcs: Vec<&[T]> = frames
+            .iter()
+            .filter_map(|f| T::samples(&f.pixels))
+            .map(|v| &v[s0..s1])
+            .collect();
+        let (cr, mr) = (
+            band_of(conf.len(), r0 * w, r1 * w),
+            band_of(clip.len(), r0 * w, r1 * w),
+        );
+        let c = run_bands(
+            &srcs,
+            luts,
+            w,
+            black,
+            &mut out[s0..s1],
+            &mut conf[cr],
+            &mut clip[mr],
+        );
+        total = (total.0 + c.0, total.1 + c.1, total.2 + c.2);
+        for f in frames.iter_mut() {
+            f.pixels.release_from(s0);
+        }
+    }
+    total
+}
+
+/// The range `a..b` of an optional per-pixel output (`0..0` when it was not asked for).
+fn band_of(len: usize, a: usize, b: usize) -> std::ops::Range<usize> {
+    if len == 0 {
+        0..0
+    } else {
+        a..b
+    }
 }
 
 /// How a group of frames contributes to a row: the only group writes the mean

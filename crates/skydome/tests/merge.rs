@@ -6,7 +6,8 @@ use common::load_jpegs;
 use skydome::bracket::{Frame, Pixels};
 use skydome::compare::{compare, well_exposed_mask, CompareOptions};
 use skydome::merge::{
-    merge, merge_into, MergeError, MergeOptions, Weighting, BLACK, CLIPPED_HIGH, CLIPPED_LOW,
+    merge, merge_into, merge_releasing, MergeError, MergeOptions, Weighting, BLACK, CLIPPED_HIGH,
+    CLIPPED_LOW,
 };
 use skydome::response::{calibrate, CalibrateOptions, Response};
 use skydome::synth::{generate, SynthOptions};
@@ -329,4 +330,62 @@ fn hand_held_bracket_merges_loosely() {
     let cons = common::frame_consistency(&frames, &cal.response, &m.radiance);
     println!("banterle_alignment: median |log2(E_frame / E_merged)| per frame: {cons:.3?}");
     assert!(cons.iter().all(|&c| c < 0.5), "{cons:?}");
+}
+
+/// `merge_releasing` gives the frames' rows back as it goes and returns exactly what `merge`
+/// does: 8- and 16-bit, a height that does not split evenly into its bands, with the
+/// confidence and the clipped mask; with the noise weighting and the consistency test, which
+/// merge whole. The frames keep their size and exposure and lose their pixels.
+#[test]
+fn merge_releasing_equals_merge_and_empties_the_frames() {
+    let b = generate(&SynthOptions {
+        width: 90,
+        height: 61,
+        ..Default::default()
+    })
+    .unwrap();
+    let cal = calibrate(&b.frames, b.circle, &CalibrateOptions::default()).unwrap();
+    let f16: Vec<Frame> = b
+        .frames
+        .iter()
+        .map(|f| {
+            let Pixels::U8(v) = &f.pixels else {
+                panic!("8-bit")
+            };
+            Frame {
+                pixels: Pixels::U16(v.iter().map(|&z| z as u16 * 257).collect()),
+                ..f.clone()
+            }
+        })
+        .collect();
+    for frames in [&b.frames, &f16] {
+        for o in [
+            MergeOptions {
+                confidence: true,
+                clipped_mask: true,
+                ..Default::default()
+            },
+            MergeOptions {
+                weighting: Weighting::Noise,
+                consistency: true,
+                ..Default::default()
+            },
+        ] {
+            let want = merge(frames, &cal.response, &o).unwrap();
+            let mut owned = frames.clone();
+            let got = merge_releasing(&mut owned, &cal.response, &o).unwrap();
+            assert_eq!(got, want);
+            for (f, g) in owned.iter().zip(frames.iter()) {
+                assert_eq!(f.pixels.len(), 0);
+                assert_eq!((f.width, f.height, &f.name), (g.width, g.height, &g.name));
+            }
+        }
+    }
+    // Errors are the same as `merge`'s.
+    let mut bad = b.frames.clone();
+    bad.reverse();
+    assert!(matches!(
+        merge_releasing(&mut bad, &cal.response, &MergeOptions::default()),
+        Err(MergeError::BadExposure { .. })
+    ));
 }

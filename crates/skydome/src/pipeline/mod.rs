@@ -508,8 +508,10 @@ pub fn run(
         ResponseSource::Calibrate(_) => None,
     };
     let check = options.consistency || options.ghosts || options.products.consistency;
-    let merged = merge::merge(
-        &br.frames,
+    // Nothing after the merge reads the frames' pixels: give them back as the merge goes, so
+    // the frames and the radiance are never both whole in memory.
+    let merged = merge::merge_releasing(
+        &mut br.frames,
         &response,
         &MergeOptions {
             weighting: options.weighting,
