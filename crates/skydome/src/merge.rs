@@ -256,12 +256,7 @@ pub fn merge_releasing(
     opts: &MergeOptions,
 ) -> Result<Merged, MergeError> {
     let mut m = merge_empty();
-    let whole = opts.weighting == Weighting::Noise || opts.consistency || opts.ghosts;
-    if whole {
-        merge_into(frames, response, opts, &mut m)?;
-    } else {
-        merge_impl(Source::Releasing(frames), response, opts, &mut m)?;
-    }
+    merge_impl(Source::Releasing(frames), response, opts, &mut m)?;
     for f in frames.iter_mut() {
         f.pixels.release_from(0);
     }
@@ -401,13 +396,10 @@ fn merge_impl(
         16 => {
             let g = |c: usize, v: usize| response.g16(c, v as u16);
             let luts = Tables::<65536>::new(&lt, wfn, g);
-            if let Source::Releasing(frames) = &mut source {
+            // Without a second pass the rows can be given back as they are merged.
+            if let (Source::Releasing(frames), None) = (&mut source, &noise_est) {
                 let counts = run_releasing(frames, &luts, w, black16, data, conf, clip);
-                (out.clipped_high, out.clipped_low, out.black_pixels) = counts;
-                out.noise = None;
-                out.tested_pixels = 0;
-                out.inconsistent_pixels = 0;
-                out.inconsistent = None;
+                finish(out, counts, None, 0, 0, None);
                 return Ok(());
             }
             let srcs: Vec<&[u16]> = source
@@ -441,13 +433,10 @@ fn merge_impl(
         _ => {
             let g = |c: usize, z: usize| response.curve(c)[z];
             let luts = Tables::<LEVELS>::new(&lt, wfn, g);
-            if let Source::Releasing(frames) = &mut source {
+            // Without a second pass the rows can be given back as they are merged.
+            if let (Source::Releasing(frames), None) = (&mut source, &noise_est) {
                 let counts = run_releasing(frames, &luts, w, opts.black_level, data, conf, clip);
-                (out.clipped_high, out.clipped_low, out.black_pixels) = counts;
-                out.noise = None;
-                out.tested_pixels = 0;
-                out.inconsistent_pixels = 0;
-                out.inconsistent = None;
+                finish(out, counts, None, 0, 0, None);
                 return Ok(());
             }
             let srcs: Vec<&[u8]> = source
@@ -479,12 +468,31 @@ fn merge_impl(
             (counts, t, f)
         }
     };
+    finish(
+        out,
+        counts,
+        noise_est,
+        tested,
+        flagged,
+        check.then_some(flags),
+    );
+    Ok(())
+}
+
+/// Stores the merge's counts and the consistency test's results in `out`.
+fn finish(
+    out: &mut Merged,
+    counts: (usize, usize, usize),
+    noise: Option<NoiseEstimate>,
+    tested: usize,
+    flagged: usize,
+    flags: Option<Vec<u8>>,
+) {
     (out.clipped_high, out.clipped_low, out.black_pixels) = counts;
-    out.noise = noise_est;
+    out.noise = noise;
     out.tested_pixels = tested;
     out.inconsistent_pixels = flagged;
-    out.inconsistent = check.then_some(flags);
-    Ok(())
+    out.inconsistent = flags;
 }
 
 /// Bins per stop of the expected-code weight tables of [`Refine`].
