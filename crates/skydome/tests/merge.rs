@@ -158,17 +158,9 @@ fn black_in_every_frame_takes_longest_exposure_and_stays_neutral() {
     assert!(m.radiance.data.iter().all(|v| v.is_finite() && *v > 0.0));
 }
 
-#[test]
-fn sixteen_bit_frames_merge_like_their_8_bit_originals() {
-    let b = generate(&SynthOptions {
-        width: 128,
-        height: 128,
-        ..Default::default()
-    })
-    .unwrap();
-    let cal = calibrate(&b.frames, b.circle, &CalibrateOptions::default()).unwrap();
-    let f16: Vec<Frame> = b
-        .frames
+/// The 8-bit frames as 16-bit ones with the same codes (`z · 257`).
+fn sixteen_bit(frames: &[Frame]) -> Vec<Frame> {
+    frames
         .iter()
         .map(|f| {
             let Pixels::U8(v) = &f.pixels else {
@@ -179,7 +171,19 @@ fn sixteen_bit_frames_merge_like_their_8_bit_originals() {
                 ..f.clone()
             }
         })
-        .collect();
+        .collect()
+}
+
+#[test]
+fn sixteen_bit_frames_merge_like_their_8_bit_originals() {
+    let b = generate(&SynthOptions {
+        width: 128,
+        height: 128,
+        ..Default::default()
+    })
+    .unwrap();
+    let cal = calibrate(&b.frames, b.circle, &CalibrateOptions::default()).unwrap();
+    let f16 = sixteen_bit(&b.frames);
     // The hat, and the noise-aware merge (its own 16-bit tables) with one fixed noise model.
     for (weighting, tol) in [(Weighting::Hat, 1e-5), (Weighting::Noise, 1e-4)] {
         let o = MergeOptions {
@@ -345,19 +349,7 @@ fn merge_releasing_equals_merge_and_empties_the_frames() {
     })
     .unwrap();
     let cal = calibrate(&b.frames, b.circle, &CalibrateOptions::default()).unwrap();
-    let f16: Vec<Frame> = b
-        .frames
-        .iter()
-        .map(|f| {
-            let Pixels::U8(v) = &f.pixels else {
-                panic!("8-bit")
-            };
-            Frame {
-                pixels: Pixels::U16(v.iter().map(|&z| z as u16 * 257).collect()),
-                ..f.clone()
-            }
-        })
-        .collect();
+    let f16 = sixteen_bit(&b.frames);
     for frames in [&b.frames, &f16] {
         for o in [
             MergeOptions {
