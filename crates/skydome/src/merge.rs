@@ -495,6 +495,25 @@ fn finish(
     out.inconsistent = flags;
 }
 
+/// One `[f32; 2]` per frame, channel and code of an `N`-level input, frame-major then channel:
+/// `entry(j, c, code, vote)` with frame `j`'s vote `log2 E_j = (g(c, code) − ln Δt_j) · log2 e`.
+/// The layout [`Tables`], [`Refine`] and [`Votes`] share.
+fn code_tables<const N: usize>(
+    lt: &[f64],
+    g: impl Fn(usize, usize) -> f64,
+    entry: impl Fn(usize, usize, usize, f32) -> [f32; 2],
+) -> Vec<[f32; 2]> {
+    let mut flat = Vec::with_capacity(lt.len() * 3 * N);
+    for (j, &l) in lt.iter().enumerate() {
+        for c in 0..3 {
+            flat.extend(
+                (0..N).map(|v| entry(j, c, v, ((g(c, v) - l) * std::f64::consts::LOG2_E) as f32)),
+            );
+        }
+    }
+    flat
+}
+
 /// Bins per stop of the expected-code weight tables of [`Refine`].
 const EXPECTED_BINS_PER_STOP: f32 = 32.0;
 
@@ -539,18 +558,12 @@ impl<const N: usize> Refine<N> {
     ) -> Self {
         let l2 = std::f64::consts::LOG2_E;
         let scale = 255.0 / (N - 1) as f64;
-        let mut votes = Vec::with_capacity(lt.len() * 3 * N);
-        for &l in lt {
-            for c in 0..3 {
-                votes.extend((0..N).map(|v| {
-                    let z = v as f64 * scale;
-                    let usable = z > black as f64 + 0.5 * scale && v + 1 < N;
-                    let fade = ((255.0 - z) / noise::TOP_FADE).clamp(0.0, 1.0);
-                    let f = if usable { fade } else { 0.0 };
-                    [((g(c, v) - l) * l2) as f32, f as f32]
-                }));
-            }
-        }
+        let votes = code_tables::<N>(lt, &g, |_, _, v, vote| {
+            let z = v as f64 * scale;
+            let usable = z > black as f64 + 0.5 * scale && v + 1 < N;
+            let fade = ((255.0 - z) / noise::TOP_FADE).clamp(0.0, 1.0);
+            [vote, if usable { fade as f32 } else { 0.0 }]
+        });
         let mut lo = [0f32; 3];
         let weights = [0, 1, 2].map(|c| {
             let curve = response.curve(c);
@@ -704,18 +717,12 @@ impl<const N: usize> Votes<N> {
                 }
             }
         }
-        let mut flat = Vec::with_capacity(lt.len() * 3 * N);
-        for &l in lt {
-            for (c, sd) in sd8.iter().enumerate() {
-                flat.extend((0..N).map(|v| {
-                    let z = v as f32 * scale;
-                    // The nearer 8-bit code's deviation (a 16-bit value between two codes has
-                    // the noise of either).
-                    let s = sd[(z.round() as usize).min(LEVELS - 1)];
-                    [((g(c, v) - l) * l2) as f32, s as f32]
-                }));
-            }
-        }
+        let flat = code_tables::<N>(lt, g, |_, c, v, vote| {
+            // The nearer 8-bit code's deviation (a 16-bit value between two codes has the
+            // noise of either).
+            let z = v as f32 * scale;
+            [vote, sd8[c][(z.round() as usize).min(LEVELS - 1)] as f32]
+        });
         Self { flat }
     }
 
@@ -927,17 +934,11 @@ impl<const N: usize> Tables<N> {
         weight: impl Fn(usize, usize, f32) -> f32,
         g: impl Fn(usize, usize) -> f64,
     ) -> Self {
-        let p = lt.len();
         let scale = 255.0 / (N - 1) as f32;
-        let mut flat = Vec::with_capacity(p * 3 * N);
-        for (j, &l) in lt.iter().enumerate() {
-            for c in 0..3 {
-                flat.extend((0..N).map(|v| {
-                    let w = weight(j, c, v as f32 * scale);
-                    [w, w * ((g(c, v) - l) * std::f64::consts::LOG2_E) as f32]
-                }));
-            }
-        }
+        let flat = code_tables::<N>(lt, g, |j, c, v, vote| {
+            let w = weight(j, c, v as f32 * scale);
+            [w, w * vote]
+        });
         Self { flat }
     }
 
