@@ -6,6 +6,7 @@
 //! Exit codes: 0 success, 1 a failed run (one line `error: <file>: <what>` on stderr),
 //! 2 a usage error (reported by clap).
 
+mod alloc;
 mod calibrate;
 mod compare;
 mod demo;
@@ -24,6 +25,9 @@ mod tonemap;
 mod views;
 
 use std::process::ExitCode;
+
+#[global_allocator]
+static ALLOCATOR: alloc::HugePageAlloc = alloc::HugePageAlloc;
 
 use clap::{Parser, Subcommand};
 

@@ -49,6 +49,7 @@
 pub mod align;
 pub mod bracket;
 pub mod compare;
+mod fastmath;
 pub mod fisheye;
 pub mod formats;
 pub mod image;

@@ -1327,73 +1327,13 @@ fn pixel_flags(ext: &[u8], mut mask: Option<&mut [u8]>, out: &mut [f32]) -> (usi
     (high as usize, low as usize, blk as usize)
 }
 
-/// `log2 x` in f32 for positive finite `x`, branch-free: the exponent from the bits and
-/// `log2 m` of the mantissa `m ∈ [1, 2)` by a degree-5 polynomial (least squares on Chebyshev
-/// points); absolute error below 1e-5 (ample for [`Refine`]'s 1/32-stop bins). Zero, negative or non-finite `x` give garbage the
-/// caller must not use.
-#[inline(always)]
-fn fast_log2(x: f32) -> f32 {
-    let bits = x.to_bits();
-    let e = ((bits >> 23) & 0xff) as i32 - 127;
-    let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000) - 1.0;
-    let p = m
-        * (1.442_534_8
-            + m * (-0.718_033_4
-                + m * (0.457_157_13
-                    + m * (-0.277_339_43 + m * (0.121_470_73 + m * -0.025_791_527)))));
-    e as f32 + p
-}
-
-/// `2^x` in f32, branch-free so loops over it vectorise: `x` is clamped to ±126, split by
-/// round-to-nearest into `k + f` with `|f| ≤ ½`, and `2^f` is a degree-5 polynomial fitted for
-/// minimum relative error on `[−½, ½]`. Relative error below 3e-7.
-#[inline(always)]
-pub fn fast_exp2(x: f32) -> f32 {
-    const MAGIC: f32 = 12_582_912.0; // 1.5 · 2²³: adding it rounds to an integer in the low bits
-    let x = x.clamp(-126.0, 126.0);
-    let t = x + MAGIC;
-    let k = t.to_bits() as i32 - 0x4B40_0000;
-    let f = x - (t - MAGIC);
-    let p = 1.000_000_1
-        + f * (0.693_146_94
-            + f * (0.240_221_2 + f * (0.055_507_13 + f * (0.009_675_542 + f * 0.001_327_647_2))));
-    p * f32::from_bits(((k + 127) as u32) << 23)
-}
+/// `2^x` in f32, branch-free (see [`crate::fastmath::exp2`]: relative error below 3·10⁻⁷).
+pub use crate::fastmath::exp2 as fast_exp2;
+use crate::fastmath::log2 as fast_log2;
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn fast_log2_matches_std_log2() {
-        let mut worst = 0f32;
-        let mut x = 1e-30f32;
-        while x < 1e30 {
-            worst = worst.max((fast_log2(x) - x.log2()).abs());
-            x *= 1.000_37;
-        }
-        assert!(worst < 1e-5, "{worst}");
-    }
-
-    #[test]
-    fn fast_exp2_matches_std_exp2() {
-        let mut worst = 0f64;
-        let mut x = -120.0f32;
-        while x < 120.0 {
-            let a = fast_exp2(x) as f64;
-            let b = (x as f64).exp2();
-            worst = worst.max(((a - b) / b).abs());
-            x += 0.00731;
-        }
-        assert!(worst < 3e-7, "worst relative error {worst}");
-    }
-
-    #[test]
-    fn fast_exp2_saturates_instead_of_wrapping() {
-        assert!(fast_exp2(1000.0).is_finite() && fast_exp2(1000.0) > 1e37);
-        assert!(fast_exp2(-1000.0) >= 0.0 && fast_exp2(-1000.0) < 1e-37);
-        assert!(fast_exp2(f32::NAN).is_nan());
-    }
 
     /// The merge's definition, evaluated per sample in f64 with no tables.
     fn reference(frames: &[Frame], r: &Response, weighting: Weighting) -> Vec<f64> {

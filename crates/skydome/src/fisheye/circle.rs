@@ -115,8 +115,9 @@ fn bilinear1(img: &[f32], w: usize, h: usize, x: f64, y: f64) -> f32 {
     // (x, y) in continuous pixel coordinates; centres at +0.5.
     let fx = (x - 0.5).clamp(0.0, (w - 1) as f64);
     let fy = (y - 0.5).clamp(0.0, (h - 1) as f64);
-    let x0 = fx.floor() as usize;
-    let y0 = fy.floor() as usize;
+    // Non-negative, so truncation is the floor (without a libm call).
+    let x0 = fx as usize;
+    let y0 = fy as usize;
     let x1 = (x0 + 1).min(w - 1);
     let y1 = (y0 + 1).min(h - 1);
     let ax = (fx - x0 as f64) as f32;
@@ -163,14 +164,23 @@ fn boundary_points(
         if !(t_edge.is_finite() && t_edge > 4.0) {
             continue;
         }
-        // Profile sampled from the frame edge inwards.
+        // Profile sampled from the frame edge inwards, as far as 8 samples past the first
+        // above the threshold (all the crossing search below reads).
         profile.clear();
         let n = (t_edge / STEP) as usize;
+        let mut first = None;
         for k in 0..=n {
             let t = t_edge - k as f64 * STEP;
-            profile.push(bilinear1(img, w, h, cx + t * dx, cy + t * dy));
+            let v = bilinear1(img, w, h, cx + t * dx, cy + t * dy);
+            profile.push(v);
+            if first.is_none() && v > threshold {
+                first = Some(k);
+            }
+            if first.is_some_and(|f| k + 1 >= f + 8) {
+                break;
+            }
         }
-        let Some(first) = profile.iter().position(|&v| v > threshold) else {
+        let Some(first) = first else {
             continue;
         };
         // Starting inside the image means the circle is cut by the frame on this ray.
@@ -290,7 +300,17 @@ fn robust_circle_fit(pts: &[(f64, f64)]) -> Result<CircleFit, FisheyeError> {
             pts[next(pts.len())],
         ];
         let Some(c) = kasa_fit(&tri) else { continue };
-        let count = pts.iter().filter(|&&p| distance(&c, p) < INLIER_PX).count();
+        // |d − r| < tol as a test on d², without a square root per point.
+        let (lo, hi) = (c.r - INLIER_PX, c.r + INLIER_PX);
+        let lo2 = if lo > 0.0 { lo * lo } else { -1.0 };
+        let hi2 = hi * hi;
+        let count = pts
+            .iter()
+            .filter(|p| {
+                let d2 = (p.0 - c.cx).powi(2) + (p.1 - c.cy).powi(2);
+                d2 > lo2 && d2 < hi2
+            })
+            .count();
         if best.is_none_or(|(b, _)| count > b) {
             best = Some((count, c));
         }

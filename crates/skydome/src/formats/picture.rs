@@ -100,6 +100,10 @@ pub fn encode_rgb8(img: &RgbImage<u8>, format: PictureFormat) -> Result<Vec<u8>,
 /// encoder (which is 4× slower on a 6 MP preview here; `cargo bench --bench tonemap`,
 /// group `preview_6mp`): it has an AVX2 path picked at run time and plain Rust elsewhere, so it
 /// builds for wasm32 too.
+///
+/// Pictures of more than one [strip](jpeg_strip_rows) are encoded strip by strip (in parallel
+/// with the `parallel` feature) and joined with restart markers into one baseline JPEG; the
+/// strips depend only on the size, so the bytes are the same on any number of threads.
 fn encode_jpeg(img: &RgbImage<u8>, quality: u8) -> Result<Vec<u8>, PictureError> {
     let err = |reason: String| PictureError::Encode {
         format: "JPEG",
@@ -113,22 +117,137 @@ fn encode_jpeg(img: &RgbImage<u8>, quality: u8) -> Result<Vec<u8>, PictureError>
         });
     }
     // JPEG stores sizes in 16 bits.
-    let (Ok(w), Ok(h)) = (u16::try_from(img.width), u16::try_from(img.height)) else {
+    if u16::try_from(img.width).is_err() || u16::try_from(img.height).is_err() {
         return Err(err(format!(
             "{}×{} is larger than JPEG's 65535×65535",
             img.width, img.height
         )));
-    };
-    if w == 0 || h == 0 {
+    }
+    if img.width == 0 || img.height == 0 {
         return Err(err("the picture is empty".into()));
     }
+    let quality = quality.clamp(1, 100);
+    let rows = jpeg_strip_rows(img.width);
+    if img.height <= rows {
+        return encode_jpeg_plain(&img.data, img.width, img.height, quality);
+    }
+    let strip_bytes = 3 * img.width * rows;
+    let encode = |strip: &[u8]| {
+        let h = strip.len() / (3 * img.width);
+        encode_jpeg_plain(strip, img.width, h, quality)
+    };
+    #[cfg(feature = "parallel")]
+    let strips: Vec<Result<Vec<u8>, PictureError>> = {
+        use rayon::prelude::*;
+        img.data.par_chunks(strip_bytes).map(encode).collect()
+    };
+    #[cfg(not(feature = "parallel"))]
+    let strips: Vec<Result<Vec<u8>, PictureError>> =
+        img.data.chunks(strip_bytes).map(encode).collect();
+    let strips = strips.into_iter().collect::<Result<Vec<_>, _>>()?;
+    let interval = (img.width.div_ceil(JPEG_MCU) * rows / JPEG_MCU) as u16;
+    join_jpeg_strips(&strips, img.height as u16, interval)
+        .ok_or_else(|| err("the strip encoder wrote an unexpected stream".into()))
+}
+
+/// The side of a 4:2:0 MCU, in pixels.
+const JPEG_MCU: usize = 16;
+
+/// Rows per strip of [`encode_jpeg`] for pictures `width` pixels wide: whole MCU rows, about
+/// 2¹⁸ pixels a strip (enough strips to share among threads, few enough that the restart
+/// markers cost nothing), and at most 65535 MCUs, the largest restart interval.
+fn jpeg_strip_rows(width: usize) -> usize {
+    let per_mcu_row = width.div_ceil(JPEG_MCU);
+    let wanted = (1usize << 18).div_ceil(JPEG_MCU * width.max(1));
+    let most = (usize::from(u16::MAX) / per_mcu_row).max(1);
+    JPEG_MCU * wanted.clamp(1, most)
+}
+
+/// One baseline 4:2:0 JPEG of `data` (`width × height` RGB, sizes already checked).
+fn encode_jpeg_plain(
+    data: &[u8],
+    width: usize,
+    height: usize,
+    quality: u8,
+) -> Result<Vec<u8>, PictureError> {
     // Compressed size is well under a byte per pixel at preview qualities.
-    let mut out = Vec::with_capacity(img.width * img.height / 2);
-    let mut enc = jpeg_encoder::Encoder::new(&mut out, quality.clamp(1, 100));
+    let mut out = Vec::with_capacity(width * height / 2);
+    let mut enc = jpeg_encoder::Encoder::new(&mut out, quality);
     enc.set_sampling_factor(jpeg_encoder::SamplingFactor::F_2_2);
-    enc.encode(&img.data, w, h, jpeg_encoder::ColorType::Rgb)
-        .map_err(|e| err(e.to_string()))?;
+    enc.encode(
+        data,
+        width as u16,
+        height as u16,
+        jpeg_encoder::ColorType::Rgb,
+    )
+    .map_err(|e| PictureError::Encode {
+        format: "JPEG",
+        reason: e.to_string(),
+    })?;
     Ok(out)
+}
+
+/// Joins separately encoded strips (same width, quality and tables; all but the last
+/// `interval` MCUs long) into one JPEG of `height` rows: the first strip's headers with its
+/// frame height set to `height` and a restart interval (DRI) added, then each strip's entropy
+/// coded data, separated by the restart markers RST0…RST7 in turn (ITU-T T.81). At a restart
+/// a decoder resets the DC predictors, which is where each strip's encoder started; each
+/// strip's data already ends on a byte boundary padded with ones, as a restart needs.
+///
+/// Written by hand because no JPEG encoder crate encodes on several threads. `None` when a
+/// strip is not the stream `jpeg-encoder` writes (SOI, segments, SOS, data, EOI).
+fn join_jpeg_strips(strips: &[Vec<u8>], height: u16, interval: u16) -> Option<Vec<u8>> {
+    const SOF0: u8 = 0xC0;
+    const SOS: u8 = 0xDA;
+    /// The offset of the SOS marker and of the entropy-coded data after its header.
+    fn split(jpeg: &[u8]) -> Option<(usize, usize)> {
+        if jpeg.get(..2)? != [0xFF, 0xD8] || jpeg.get(jpeg.len().checked_sub(2)?..)? != [0xFF, 0xD9]
+        {
+            return None;
+        }
+        let mut at = 2;
+        loop {
+            let (&ff, &marker) = (jpeg.get(at)?, jpeg.get(at + 1)?);
+            let len = usize::from(u16::from_be_bytes([*jpeg.get(at + 2)?, *jpeg.get(at + 3)?]));
+            if ff != 0xFF || len < 2 {
+                return None;
+            }
+            if marker == SOS {
+                return Some((at, at + 2 + len));
+            }
+            at += 2 + len;
+        }
+    }
+    let (first, rest) = strips.split_first()?;
+    let (sos, data) = split(first)?;
+    let total: usize = strips.iter().map(Vec::len).sum();
+    let mut out = Vec::with_capacity(total + 6 + 2 * strips.len());
+    out.extend_from_slice(&first[..sos]);
+    // The frame header's height: SOF0, length, precision, then the height.
+    let mut at = 2;
+    let mut patched = false;
+    while at + 7 <= sos {
+        let len = usize::from(u16::from_be_bytes([out[at + 2], out[at + 3]]));
+        if out[at + 1] == SOF0 {
+            out[at + 5..at + 7].copy_from_slice(&height.to_be_bytes());
+            patched = true;
+        }
+        at += 2 + len;
+    }
+    if !patched {
+        return None;
+    }
+    out.extend_from_slice(&[0xFF, 0xDD, 0x00, 0x04]);
+    out.extend_from_slice(&interval.to_be_bytes());
+    out.extend_from_slice(&first[sos..data]);
+    out.extend_from_slice(&first[data..first.len() - 2]);
+    for (i, strip) in rest.iter().enumerate() {
+        out.extend_from_slice(&[0xFF, 0xD0 + (i % 8) as u8]);
+        let (_, data) = split(strip)?;
+        out.extend_from_slice(&strip[data..strip.len() - 2]);
+    }
+    out.extend_from_slice(&[0xFF, 0xD9]);
+    Some(out)
 }
 
 /// Encodes a 16-bit RGB picture; only PNG holds 16 bits.
@@ -190,4 +309,83 @@ fn encode_png(
         .write_image(data, w32, h32, ct)
         .map_err(|e| err(e.to_string()))?;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A smooth colour ramp with a noise texture, `w × h`.
+    fn picture(w: usize, h: usize) -> RgbImage<u8> {
+        let mut img = RgbImage::<u8>::new(w, h);
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        for y in 0..h {
+            for x in 0..w {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                let n = (state % 24) as usize;
+                let i = 3 * (y * w + x);
+                img.data[i] = ((x * 200 / w) + n) as u8;
+                img.data[i + 1] = ((y * 200 / h) + n) as u8;
+                img.data[i + 2] = (((x + y) * 100 / (w + h)) + 2 * n) as u8;
+            }
+        }
+        img
+    }
+
+    fn decode(jpeg: &[u8]) -> (u32, u32, Vec<u8>) {
+        let img = image::load_from_memory_with_format(jpeg, image::ImageFormat::Jpeg)
+            .expect("decodes")
+            .to_rgb8();
+        (img.width(), img.height(), img.into_raw())
+    }
+
+    #[test]
+    fn strips_joined_with_restart_markers_decode_like_one_encode() {
+        // Heights: one MCU row short of a strip, several strips with an uneven last one
+        // (more than 8, so the RST markers wrap), and an odd width.
+        for (w, h) in [(640, 100), (640, 4000), (333, 9000)] {
+            let img = picture(w, h);
+            let rows = jpeg_strip_rows(w);
+            let strips = h.div_ceil(rows);
+            let joined = encode_rgb8(&img, PictureFormat::Jpeg { quality: 92 }).unwrap();
+            let plain = encode_jpeg_plain(&img.data, w, h, 92).unwrap();
+            assert_eq!(joined == plain, strips == 1, "{w}×{h}: {strips} strips");
+            let (jw, jh, jd) = decode(&joined);
+            let (pw, ph, pd) = decode(&plain);
+            assert_eq!((jw, jh), (w as u32, h as u32));
+            assert_eq!((pw, ph), (w as u32, h as u32));
+            assert!(jd == pd, "{w}×{h}: the joined strips decode differently");
+            // One restart marker between each two strips.
+            let markers = joined
+                .windows(2)
+                .filter(|p| p[0] == 0xFF && (0xD0..=0xD7).contains(&p[1]))
+                .count();
+            assert_eq!(markers, strips - 1, "{w}×{h}");
+        }
+    }
+
+    #[test]
+    fn strip_rows_are_whole_mcus_within_the_restart_limit() {
+        for w in [1, 15, 16, 17, 640, 2448, 4032, 20_000, 65_535] {
+            let rows = jpeg_strip_rows(w);
+            assert!(rows >= JPEG_MCU && rows.is_multiple_of(JPEG_MCU), "{w}: {rows}");
+            assert!(
+                w.div_ceil(JPEG_MCU) * rows / JPEG_MCU <= usize::from(u16::MAX),
+                "{w}"
+            );
+        }
+        assert_eq!(jpeg_strip_rows(2448), 112);
+    }
+
+    #[test]
+    fn a_stream_that_is_not_a_jpeg_is_not_joined() {
+        let img = picture(64, 64);
+        let good = encode_jpeg_plain(&img.data, 64, 64, 90).unwrap();
+        assert!(join_jpeg_strips(&[good.clone(), good.clone()], 128, 4).is_some());
+        assert!(join_jpeg_strips(&[good.clone(), vec![0xFF, 0xD8, 0xFF, 0xD9]], 128, 4).is_none());
+        assert!(join_jpeg_strips(&[good[..good.len() - 2].to_vec()], 64, 4).is_none());
+        assert!(join_jpeg_strips(&[], 64, 4).is_none());
+    }
 }

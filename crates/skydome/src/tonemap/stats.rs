@@ -109,11 +109,8 @@ pub struct RadianceStats {
     pub luminance: LuminanceStats,
 }
 
-/// A polynomial log₂ for positive, finite `x`: exponent plus a degree-6 least-squares fit of
-/// `log₂(1 + t)` on the mantissa, error below 3·10⁻⁶. Subnormals go through `log2`.
-///
-/// Hand-written because the standard `log2` is an opaque call per pixel; a fit this small
-/// inlines and vectorises, and no crate offers one without pulling in a SIMD framework.
+/// `log₂ x` for positive, finite `x` ([`crate::fastmath::log2`], error below 3·10⁻⁶);
+/// subnormals go through the standard `log2`.
 #[inline(always)]
 pub(crate) fn fast_log2(x: f32) -> f32 {
     if x < f32::MIN_POSITIVE {
@@ -122,28 +119,7 @@ pub(crate) fn fast_log2(x: f32) -> f32 {
     log2_normal(x)
 }
 
-/// [`fast_log2`] without the subnormal branch: exact only for normal, finite `x > 0`.
-#[inline(always)]
-fn log2_normal(x: f32) -> f32 {
-    let bits = x.to_bits();
-    let e = ((bits >> 23) as i32 - 127) as f32;
-    let t = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000) - 1.0;
-    const C: [f32; 6] = [
-        1.442_534_8,
-        -0.718_033_6,
-        0.457_158_1,
-        -0.277_341_65,
-        0.121_472_95,
-        -0.025_792_345,
-    ];
-    let p = C[5];
-    let p = p * t + C[4];
-    let p = p * t + C[3];
-    let p = p * t + C[2];
-    let p = p * t + C[1];
-    let p = p * t + C[0];
-    e + p * t
-}
+use crate::fastmath::log2 as log2_normal;
 
 /// How pixels are weighted in the statistics.
 #[derive(Debug, Clone, Copy)]
