@@ -37,16 +37,28 @@ pub enum Pixels {
 impl Pixels {
     /// Keeps the first `len` samples and gives the rest of the buffer back to the allocator
     /// (with glibc, a large buffer shrinks in place and the freed pages leave the process).
+    ///
+    /// Unless `len` is 0 (everything goes), the cut is moved up to the next 2 MiB boundary of
+    /// address, keeping at most 2 MiB more: where the kernel backs the buffer with transparent
+    /// huge pages (as the command line asks), the freed part is then whole huge pages, returned
+    /// at once, rather than the tail of one, which Linux holds until it splits the page later.
     pub(crate) fn release_from(&mut self, len: usize) {
+        fn release<T>(v: &mut Vec<T>, len: usize) {
+            const HUGE_PAGE: usize = 2 << 20;
+            let keep = if len == 0 {
+                0
+            } else {
+                let start = v.as_ptr() as usize;
+                let end = start + len * std::mem::size_of::<T>();
+                let aligned = end.next_multiple_of(HUGE_PAGE) - start;
+                (aligned / std::mem::size_of::<T>()).clamp(len, v.len().max(len))
+            };
+            v.truncate(keep);
+            v.shrink_to_fit();
+        }
         match self {
-            Pixels::U8(v) => {
-                v.truncate(len);
-                v.shrink_to_fit();
-            }
-            Pixels::U16(v) => {
-                v.truncate(len);
-                v.shrink_to_fit();
-            }
+            Pixels::U8(v) => release(v, len),
+            Pixels::U16(v) => release(v, len),
         }
     }
 

@@ -370,7 +370,10 @@ mod tests {
     fn strip_rows_are_whole_mcus_within_the_restart_limit() {
         for w in [1, 15, 16, 17, 640, 2448, 4032, 20_000, 65_535] {
             let rows = jpeg_strip_rows(w);
-            assert!(rows >= JPEG_MCU && rows.is_multiple_of(JPEG_MCU), "{w}: {rows}");
+            assert!(
+                rows >= JPEG_MCU && rows.is_multiple_of(JPEG_MCU),
+                "{w}: {rows}"
+            );
             assert!(
                 w.div_ceil(JPEG_MCU) * rows / JPEG_MCU <= usize::from(u16::MAX),
                 "{w}"

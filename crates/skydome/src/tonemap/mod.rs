@@ -703,15 +703,23 @@ pub fn tonemap_u8(img: &HdrImage, tm: &ToneMap) -> Result<RgbImage<u8>, TonemapE
         let (x0, x1) = row_span(mask.as_ref(), w, y);
         let src = &irow[3 * x0..3 * x1];
         let dst = &mut orow[3 * x0..3 * x1];
+        let noise = |i: usize| dither_offsets(dither, x0 + i, y).map(|o| o + 0.5);
         match dither {
             Dither::Ordered => {
-                // The Bayer row, with the +½ of rounding folded in.
-                let bayer = BAYER8[y & 7].map(|b| (b as f32 + 0.5) / 64.0);
-                map_row_u8(lut, src, dst, |i| [bayer[(x0 + i) & 7]; 3]);
+                // The Bayer row, with the +½ of rounding folded in. Blocks are 8 pixels, the
+                // pattern's period, so every block of the span sees the same offsets.
+                let bayer: [f32; BLOCK] =
+                    std::array::from_fn(|i| (BAYER8[y & 7][(x0 + i) & 7] as f32 + 0.5) / 64.0);
+                map_row_u8(lut, src, dst, |_| [bayer; 3], noise);
             }
-            other => map_row_u8(lut, src, dst, |i| {
-                dither_offsets(other, x0 + i, y).map(|o| o + 0.5)
-            }),
+            Dither::None => map_row_u8(lut, src, dst, |_| [[0.5; BLOCK]; 3], noise),
+            Dither::Noise { .. } => {
+                let block = |first: usize| {
+                    let per_pixel: [[f32; 3]; BLOCK] = std::array::from_fn(|i| noise(first + i));
+                    std::array::from_fn(|c| std::array::from_fn(|i| per_pixel[i][c]))
+                };
+                map_row_u8(lut, src, dst, block, noise)
+            }
         }
     };
     for_each_row(&mut out.data, &img.data, w, row_fn);
@@ -721,15 +729,22 @@ pub fn tonemap_u8(img: &HdrImage, tm: &ToneMap) -> Result<RgbImage<u8>, TonemapE
 /// Pixels per block of [`map_row_u8`].
 const BLOCK: usize = 8;
 
-/// The inner loop of [`tonemap_u8`] over one row span; `offset(i)` is the dither of the `i`-th
-/// pixel of the span plus ½ (rounding).
+/// The inner loop of [`tonemap_u8`] over one row span. The dither of the `i`-th pixel of the
+/// span plus ½ (rounding) is `offset(i)`, and per channel for the [`BLOCK`] pixels from `first`
+/// on `block_offsets(first)`.
 ///
 /// Written by hand in blocks of [`BLOCK`] pixels, channel-planar and without branches (the
 /// white and desaturation cases are selects), so the compiler vectorises everything but the
 /// two table look-ups; a pixel-at-a-time loop with early exits ran about twice as slow. The
 /// results are those of [`CurveLut::map`] then [`srgb255`] per pixel.
 #[inline(always)]
-fn map_row_u8(lut: &CurveLut, src: &[f32], dst: &mut [u8], offset: impl Fn(usize) -> [f32; 3]) {
+fn map_row_u8(
+    lut: &CurveLut,
+    src: &[f32],
+    dst: &mut [u8],
+    block_offsets: impl Fn(usize) -> [[f32; BLOCK]; 3],
+    offset: impl Fn(usize) -> [f32; 3],
+) {
     let blocks = src
         .chunks_exact(3 * BLOCK)
         .zip(dst.chunks_exact_mut(3 * BLOCK));
@@ -773,12 +788,16 @@ fn map_row_u8(lut: &CurveLut, src: &[f32], dst: &mut [u8], offset: impl Fn(usize
                 q[c][i] = srgb255(d[c][i]);
             }
         }
-        for i in 0..BLOCK {
-            let off = offset(b * BLOCK + i);
-            for c in 0..3 {
+        let off = block_offsets(b * BLOCK);
+        let mut codes = [[0u8; BLOCK]; 3];
+        for c in 0..3 {
+            for i in 0..BLOCK {
                 // Black (zero luminance) stays black: its code is 0 + offset < 1.
-                o[3 * i + c] = (q[c][i] + off[c]).clamp(0.0, 255.0) as u8;
+                codes[c][i] = (q[c][i] + off[c][i]).clamp(0.0, 255.0) as u8;
             }
+        }
+        for (i, px) in o.chunks_exact_mut(3).enumerate() {
+            px.copy_from_slice(&[codes[0][i], codes[1][i], codes[2][i]]);
         }
     }
     let tail = src[3 * done..]
