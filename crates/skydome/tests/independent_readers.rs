@@ -223,3 +223,69 @@ fn opencv_and_openimageio_read_our_hdr_and_exr_files() {
     assert!(out.status.success(), "--check failed:\n{text}");
     assert!(text.contains("agree within RGBE precision"), "{text}");
 }
+
+/// A preview-sized JPEG written in strips joined by restart markers decodes in OpenCV and
+/// OpenImageIO (both libjpeg-based) to what our own decoder (zune-jpeg, through `image`) sees:
+/// a broken join would shift or garble everything after the first strip.
+#[test]
+fn opencv_and_openimageio_decode_our_strip_encoded_jpeg() {
+    let py = python();
+    let required = std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").is_ok_and(|v| v == "1");
+    if !readers_available(&py) {
+        assert!(
+            !required,
+            "SKYDOME_REQUIRE_INDEPENDENT_READERS=1 but cv2/OpenImageIO are missing"
+        );
+        eprintln!("skipped: `{py} -c \"import cv2, OpenImageIO\"` fails");
+        return;
+    }
+    use skydome::formats::picture::{encode_rgb8, PictureFormat};
+    use skydome::tonemap::{tonemap_u8, ToneMap};
+    // A tone-mapped sky 700 × 5000: many strips, an uneven last one, more than 8 restarts.
+    let img = sky(700, 5000, 14.0, 11);
+    let rgb = tonemap_u8(&img, &ToneMap::default()).unwrap();
+    let jpeg = encode_rgb8(&rgb, PictureFormat::Jpeg { quality: 92 }).unwrap();
+    let restarts = jpeg
+        .windows(2)
+        .filter(|p| p[0] == 0xFF && (0xD0..=0xD7).contains(&p[1]))
+        .count();
+    assert!(restarts > 8, "{restarts} restart markers");
+    let ours = image::load_from_memory(&jpeg).unwrap().to_rgb8().into_raw();
+    let dir = tempfile::tempdir().unwrap();
+    let (jp, raw) = (dir.path().join("strips.jpg"), dir.path().join("ours.rgb"));
+    std::fs::write(&jp, &jpeg).unwrap();
+    std::fs::write(&raw, &ours).unwrap();
+    let script = r#"
+import sys, numpy as np, cv2, OpenImageIO as oiio
+jp, raw, w, h = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+ours = np.fromfile(raw, np.uint8).reshape(h, w, 3).astype(int)
+cv = cv2.imread(jp, cv2.IMREAD_COLOR)[:, :, ::-1].astype(int)
+inp = oiio.ImageInput.open(jp)
+oi = np.asarray(inp.read_image(0, 0, 0, 3, "uint8")).astype(int)
+inp.close()
+for name, got in (("OpenCV", cv), ("OpenImageIO", oi)):
+    d = np.abs(got - ours)
+    # libjpeg upsamples chroma differently from zune-jpeg (a few codes at colour edges, 0.19
+    # on average here); per band of 16 rows, a misplaced restart shows as a band far off.
+    worst_band = max(d[y:y + 16].mean() for y in range(0, h, 16))
+    print(f"{name}: max {d.max()}, mean {d.mean():.4f}, worst 16-row band mean {worst_band:.3f}")
+    if got.shape != ours.shape or worst_band > 3.0 or d.mean() > 0.5:
+        sys.exit(1)
+"#;
+    let out = Command::new(&py)
+        .arg("-c")
+        .arg(script)
+        .arg(&jp)
+        .arg(&raw)
+        .arg(rgb.width.to_string())
+        .arg(rgb.height.to_string())
+        .output()
+        .expect("running python");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprintln!("{text}");
+    assert!(out.status.success(), "{text}");
+}

@@ -907,14 +907,27 @@ pub fn read_rgbe<R: BufRead>(mut r: R, limits: &Limits) -> Result<RgbeFile, Rgbe
     let max_bytes = (n_scan as u64).saturating_mul(per_scan);
     let mut data = Vec::new();
     r.take(max_bytes).read_to_end(&mut data)?;
-    let rgbe = decode_scanlines(&data, n_scan, scan_len)?;
-    let image = to_float(&rgbe, &header);
-    Ok(RgbeFile { image, header })
+    decode_pixels(&data, header)
 }
 
-/// Reads a `.hdr` file from memory (see [`read_rgbe`]).
+/// Reads a `.hdr` file from memory (see [`read_rgbe`]), decoding the pixels in place rather
+/// than through a copy of the file.
 pub fn decode_rgbe(bytes: &[u8], limits: &Limits) -> Result<RgbeFile, RgbeError> {
-    read_rgbe(bytes, limits)
+    let mut rest = bytes;
+    let header = read_header(&mut rest, limits)?;
+    decode_pixels(rest, header)
+}
+
+/// Decodes the pixel data that follows `header`.
+fn decode_pixels(data: &[u8], header: RgbeHeader) -> Result<RgbeFile, RgbeError> {
+    let (n_scan, scan_len) = if header.orientation.rows_are_scanlines {
+        (header.height, header.width)
+    } else {
+        (header.width, header.height)
+    };
+    let rgbe = decode_scanlines(data, n_scan, scan_len)?;
+    let image = to_float(&rgbe, &header);
+    Ok(RgbeFile { image, header })
 }
 
 fn decode_scanlines(src: &[u8], n_scan: usize, len: usize) -> Result<Vec<u8>, RgbeError> {
