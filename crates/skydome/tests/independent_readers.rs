@@ -26,6 +26,22 @@ fn readers_available(py: &str) -> bool {
         .is_ok_and(|o| o.status.success())
 }
 
+/// The Python interpreter, when it has both readers; `None` (test skipped) otherwise, unless
+/// `SKYDOME_REQUIRE_INDEPENDENT_READERS=1`, which makes that a failure.
+fn readers() -> Option<String> {
+    let py = python();
+    if readers_available(&py) {
+        return Some(py);
+    }
+    let required = std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").is_ok_and(|v| v == "1");
+    assert!(
+        !required,
+        "SKYDOME_REQUIRE_INDEPENDENT_READERS=1 but `{py} -c \"import cv2, OpenImageIO\"` fails; pip install numpy \"opencv-python-headless<5\" OpenImageIO"
+    );
+    eprintln!("skipping: `{py}` cannot import cv2 and OpenImageIO (set SKYDOME_PYTHON)");
+    None
+}
+
 /// A sky-like image spanning `stops` stops: a dim-to-bright gradient, a sun disc, noise.
 fn sky(width: usize, height: usize, stops: f64, seed: u64) -> HdrImage {
     let mut img = HdrImage::new(width, height);
@@ -87,16 +103,9 @@ fn dump(path: &Path, data: &[f32]) {
 
 #[test]
 fn opencv_and_openimageio_read_our_hdr_and_exr_files() {
-    let py = python();
-    let required = std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").is_ok_and(|v| v == "1");
-    if !readers_available(&py) {
-        assert!(
-            !required,
-            "SKYDOME_REQUIRE_INDEPENDENT_READERS=1 but `{py} -c \"import cv2, OpenImageIO\"` fails; pip install numpy \"opencv-python-headless<5\" OpenImageIO"
-        );
-        eprintln!("skipping: `{py}` cannot import cv2 and OpenImageIO (set SKYDOME_PYTHON)");
+    let Some(py) = readers() else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let cases = [
         // ≥ 16 stops (20 here) with a sun disc 2^10 above the mid level.
@@ -229,16 +238,9 @@ fn opencv_and_openimageio_read_our_hdr_and_exr_files() {
 /// a broken join would shift or garble everything after the first strip.
 #[test]
 fn opencv_and_openimageio_decode_our_strip_encoded_jpeg() {
-    let py = python();
-    let required = std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").is_ok_and(|v| v == "1");
-    if !readers_available(&py) {
-        assert!(
-            !required,
-            "SKYDOME_REQUIRE_INDEPENDENT_READERS=1 but cv2/OpenImageIO are missing"
-        );
-        eprintln!("skipped: `{py} -c \"import cv2, OpenImageIO\"` fails");
+    let Some(py) = readers() else {
         return;
-    }
+    };
     use skydome::formats::picture::{encode_rgb8, PictureFormat};
     use skydome::tonemap::{tonemap_u8, ToneMap};
     // A tone-mapped sky 700 × 5000: many strips, an uneven last one, more than 8 restarts.
