@@ -642,6 +642,11 @@ fn fill_bands(
             }
         }
     }
+    let filled =
+        |counts: &[[usize; 3]]| counts.iter().all(|b| b.iter().all(|&n| n >= MIN_PER_BAND));
+    if filled(&counts) {
+        return 0;
+    }
     // Candidate positions: an even lattice, shuffled.
     let step = ((w * h) as f64 / 40_000.0).sqrt().max(1.0) as usize;
     let cand: Vec<(usize, usize)> = (0..h)
@@ -673,7 +678,7 @@ fn fill_bands(
     let taken: std::collections::HashSet<(usize, usize)> = positions.iter().copied().collect();
     let mut added = 0;
     for k in order {
-        if counts.iter().all(|b| b.iter().all(|&n| n >= MIN_PER_BAND)) {
+        if filled(&counts) {
             break;
         }
         let (x, y) = cand[k];

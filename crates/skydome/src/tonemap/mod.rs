@@ -73,7 +73,7 @@
 //! per pixel: the per-pixel gain `s(L) = Ld(k·L) / L` is tabulated once per image at 128 points
 //! per octave of `L` (indexed by the bits of the `f32`, linear interpolation inside a segment,
 //! relative error < 5·10⁻⁵, a hundredth of a code). The 8-bit path works on blocks of 8 pixels
-//! without branches, skips blocks that are black (a fish-eye's housing), and encodes sRGB with
+//! without branches, skips blocks that are exactly black, and encodes sRGB with
 //! a polynomial `log₂`/`2ˣ` (within 10⁻³ of a code), so all but the gain look-up vectorises. The
 //! exact per-pixel formulas stay available as [`tonemap_u8_reference`]; tests bound the
 //! difference (at most one code value, at the 99th percentile none).
@@ -735,7 +735,8 @@ const BLOCK: usize = 8;
 ///
 /// Written by hand in blocks of [`BLOCK`] pixels, channel-planar and without branches (the
 /// white and desaturation cases are selects), so the compiler vectorises everything but the
-/// two table look-ups; a pixel-at-a-time loop with early exits ran about twice as slow. The
+/// gain look-up, one per pixel; with the sRGB polynomial it measured about 1.2× faster on one
+/// core than the pixel-at-a-time loop with early exits and an sRGB table it replaced. The
 /// results are those of [`CurveLut::map`] then [`srgb255`] per pixel.
 #[inline(always)]
 fn map_row_u8(
