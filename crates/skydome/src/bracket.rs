@@ -1015,6 +1015,22 @@ pub fn best_exposed_u8(frames: &[Frame]) -> crate::image::RgbImage<u8> {
             Pixels::U16(v) => v.iter().map(|&x| bin16(x)).collect(),
         }
     };
+    match best_exposed(frames) {
+        Some(f) => crate::image::RgbImage {
+            width: f.width,
+            height: f.height,
+            data: to8(&f.pixels),
+        },
+        None => crate::image::RgbImage {
+            width: 0,
+            height: 0,
+            data: Vec::new(),
+        },
+    }
+}
+
+/// The frame [`best_exposed_u8`] copies, borrowed (`None` for no frames).
+pub fn best_exposed(frames: &[Frame]) -> Option<&Frame> {
     let well = |p: &Pixels| -> usize {
         match p {
             Pixels::U8(v) => v
@@ -1029,18 +1045,7 @@ pub fn best_exposed_u8(frames: &[Frame]) -> crate::image::RgbImage<u8> {
                 .count(),
         }
     };
-    match frames.iter().max_by_key(|f| well(&f.pixels)) {
-        Some(f) => crate::image::RgbImage {
-            width: f.width,
-            height: f.height,
-            data: to8(&f.pixels),
-        },
-        None => crate::image::RgbImage {
-            width: 0,
-            height: 0,
-            data: Vec::new(),
-        },
-    }
+    frames.iter().max_by_key(|f| well(&f.pixels))
 }
 
 fn describe(e: &Exposure) -> String {

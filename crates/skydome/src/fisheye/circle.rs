@@ -23,12 +23,36 @@ pub struct CircleFit {
 /// both stand out from the housing. See the module docs for the method.
 pub fn detect_circle(img: &RgbImage<u8>) -> Result<CircleFit, FisheyeError> {
     img.validate()?;
-    let luma: Vec<u8> = img
-        .data
-        .chunks_exact(3)
-        .map(|c| c[0].max(c[1]).max(c[2]))
-        .collect();
-    detect_circle_luma(&luma, img.width, img.height)
+    detect_circle_rgb8(&img.data, img.width, img.height)
+}
+
+/// [`detect_circle`] on interleaved 8-bit RGB samples (`width * height * 3`, row-major, origin
+/// top-left), borrowed: the pipeline runs it on a frame of the bracket without a copy.
+pub(crate) fn detect_circle_rgb8(
+    rgb: &[u8],
+    width: usize,
+    height: usize,
+) -> Result<CircleFit, FisheyeError> {
+    crate::image::check_samples(rgb.len(), width, height, 3)?;
+    let mut luma = vec![0u8; width * height];
+    let max_rgb = |(o, c): (&mut [u8], &[u8])| {
+        for (l, p) in o.iter_mut().zip(c.chunks_exact(3)) {
+            *l = p[0].max(p[1]).max(p[2]);
+        }
+    };
+    let rows = width * 64;
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        luma.par_chunks_mut(rows)
+            .zip(rgb.par_chunks(3 * rows))
+            .for_each(max_rgb);
+    }
+    #[cfg(not(feature = "parallel"))]
+    luma.chunks_mut(rows)
+        .zip(rgb.chunks(3 * rows))
+        .for_each(max_rgb);
+    detect_circle_luma(&luma, width, height)
 }
 
 /// [`detect_circle`] on a single-channel 8-bit image (`width * height` samples, row-major,
@@ -42,29 +66,49 @@ pub fn detect_circle_luma(
         return Err(FisheyeError::ImageTooSmall { width, height });
     }
     crate::image::check_samples(luma.len(), width, height, 1)?;
-    let img = blur3(luma, width, height);
-    let (housing, threshold) = housing_threshold(&img, width, height);
+    let img = Blurred::new(luma, width, height);
+    let (housing, threshold) = housing_threshold(&img);
 
-    // Rough centre: centroid of the pixels above threshold.
-    let (mut sx, mut sy, mut cnt) = (0.0, 0.0, 0.0);
-    for y in 0..height {
-        for x in 0..width {
-            if img[y * width + x] > threshold {
-                sx += x as f64 + 0.5;
-                sy += y as f64 + 0.5;
-                cnt += 1.0;
+    // Rough centre: centroid of the pixels above threshold (whole pixel sums, exact in u64).
+    let above = img.first_sum_above(threshold);
+    let row_sums = |(y, row): (usize, &[u16])| {
+        let (mut n, mut sx) = (0u64, 0u64);
+        for (x, &s) in row.iter().enumerate() {
+            if s >= above {
+                n += 1;
+                sx += x as u64;
             }
         }
-    }
-    if cnt < 16.0 {
+        (n, sx, n * y as u64)
+    };
+    let add = |a: (u64, u64, u64), b: (u64, u64, u64)| (a.0 + b.0, a.1 + b.1, a.2 + b.2);
+    #[cfg(feature = "parallel")]
+    let (n, sx, sy) = {
+        use rayon::prelude::*;
+        img.sums
+            .par_chunks(width)
+            .enumerate()
+            .map(row_sums)
+            .reduce(|| (0, 0, 0), add)
+    };
+    #[cfg(not(feature = "parallel"))]
+    let (n, sx, sy) = img
+        .sums
+        .chunks(width)
+        .enumerate()
+        .map(row_sums)
+        .fold((0, 0, 0), add);
+    if n < 16 {
         return Err(FisheyeError::NoCircle { points: 0 });
     }
-    let mut centre = (sx / cnt, sy / cnt);
+    let cnt = n as f64;
+    // Σ(x + 0.5) / n, as the pixel centres' mean (every sum is exact in f64).
+    let mut centre = ((sx as f64 + 0.5 * cnt) / cnt, (sy as f64 + 0.5 * cnt) / cnt);
     let mut best: Option<CircleFit> = None;
     // Two passes: the centroid is biased when the circle is cut by the frame; rays cast from the
     // first fit's centre meet the boundary more squarely.
     for _ in 0..2 {
-        let pts = boundary_points(&img, width, height, centre, housing, threshold);
+        let pts = boundary_points(&img, centre, housing, threshold);
         let fit = robust_circle_fit(&pts)?;
         centre = (fit.circle.cx, fit.circle.cy);
         best = Some(fit);
@@ -72,46 +116,96 @@ pub fn detect_circle_luma(
     best.ok_or(FisheyeError::NoCircle { points: 0 })
 }
 
-/// 3×3 box blur in f32 (edge pixels replicate), to tame sensor noise before thresholding.
-fn blur3(src: &[u8], w: usize, h: usize) -> Vec<f32> {
-    let mut out = vec![0.0f32; w * h];
-    for y in 0..h {
-        let ys = [y.saturating_sub(1), y, (y + 1).min(h - 1)];
-        for x in 0..w {
-            let xs = [x.saturating_sub(1), x, (x + 1).min(w - 1)];
-            let mut s = 0u32;
-            for &yy in &ys {
-                for &xx in &xs {
-                    s += u32::from(src[yy * w + xx]);
-                }
+/// The 3×3 box blur of an 8-bit image (edge pixels replicate), to tame sensor noise before
+/// thresholding, kept as the window sums (`0..=9·255`, so the blurred value is `sum / 9`):
+/// half the memory of `f32` values, a histogram instead of a sort for the percentiles, and an
+/// integer threshold for the centroid.
+struct Blurred {
+    sums: Vec<u16>,
+    w: usize,
+    h: usize,
+}
+
+/// Largest 3×3 window sum of 8-bit samples.
+const MAX_SUM: usize = 9 * 255;
+
+impl Blurred {
+    fn new(src: &[u8], w: usize, h: usize) -> Self {
+        let mut sums = vec![0u16; w * h];
+        // Column sums of three rows, then three columns of those.
+        let row = |(y, out): (usize, &mut [u16])| {
+            let r = |yy: usize| &src[yy * w..][..w];
+            let (a, b, c) = (r(y.saturating_sub(1)), r(y), r((y + 1).min(h - 1)));
+            let col: Vec<u16> = (0..w)
+                .map(|x| u16::from(a[x]) + u16::from(b[x]) + u16::from(c[x]))
+                .collect();
+            for x in 0..w {
+                out[x] = col[x.saturating_sub(1)] + col[x] + col[(x + 1).min(w - 1)];
             }
-            out[y * w + x] = s as f32 / 9.0;
+        };
+        #[cfg(feature = "parallel")]
+        {
+            use rayon::prelude::*;
+            sums.par_chunks_mut(w).enumerate().for_each(row);
         }
+        #[cfg(not(feature = "parallel"))]
+        sums.chunks_mut(w).enumerate().for_each(row);
+        Self { sums, w, h }
     }
-    out
+
+    /// The blurred value of a window sum.
+    #[inline]
+    fn value(sum: u16) -> f32 {
+        f32::from(sum) / 9.0
+    }
+
+    /// The smallest window sum whose value exceeds `threshold` (`MAX_SUM + 1` when none does).
+    fn first_sum_above(&self, threshold: f32) -> u16 {
+        (0..=MAX_SUM as u16)
+            .find(|&s| Self::value(s) > threshold)
+            .unwrap_or(MAX_SUM as u16 + 1)
+    }
 }
 
 /// Housing level (median of the four corner patches) and the image/housing threshold.
-fn housing_threshold(img: &[f32], w: usize, h: usize) -> (f32, f32) {
+fn housing_threshold(img: &Blurred) -> (f32, f32) {
+    let (w, h) = (img.w, img.h);
     let p = (w.min(h) / 20).max(2);
     let mut corner = Vec::with_capacity(4 * p * p);
     for (x0, y0) in [(0, 0), (w - p, 0), (0, h - p), (w - p, h - p)] {
         for y in y0..y0 + p {
-            corner.extend_from_slice(&img[y * w + x0..y * w + x0 + p]);
+            corner.extend_from_slice(&img.sums[y * w + x0..y * w + x0 + p]);
         }
     }
-    corner.sort_by(f32::total_cmp);
-    let housing = corner[corner.len() / 2];
-    let noise = corner[(corner.len() * 9) / 10] - housing;
-    let mut all: Vec<f32> = img.iter().step_by(3).copied().collect();
-    all.sort_by(f32::total_cmp);
-    let p95 = all[(all.len() * 95) / 100];
+    corner.sort_unstable();
+    let housing = Blurred::value(corner[corner.len() / 2]);
+    let noise = Blurred::value(corner[(corner.len() * 9) / 10]) - housing;
+    // The 95th percentile of every third pixel, from a histogram of the window sums.
+    let mut hist = vec![0usize; MAX_SUM + 1];
+    let mut len = 0usize;
+    for &s in img.sums.iter().step_by(3) {
+        hist[usize::from(s)] += 1;
+        len += 1;
+    }
+    let rank = (len * 95) / 100;
+    let mut seen = 0usize;
+    let mut p95 = MAX_SUM as u16;
+    for (s, &c) in hist.iter().enumerate() {
+        seen += c;
+        if seen > rank {
+            p95 = s as u16;
+            break;
+        }
+    }
+    let p95 = Blurred::value(p95);
     let t = housing + (0.1 * (p95 - housing)).max(3.0 * noise + 2.0);
     (housing, t)
 }
 
 #[inline]
-fn bilinear1(img: &[f32], w: usize, h: usize, x: f64, y: f64) -> f32 {
+fn bilinear1(img: &Blurred, x: f64, y: f64) -> f32 {
+    let (w, h) = (img.w, img.h);
+    let at = |i: usize| Blurred::value(img.sums[i]);
     // (x, y) in continuous pixel coordinates; centres at +0.5.
     let fx = (x - 0.5).clamp(0.0, (w - 1) as f64);
     let fy = (y - 0.5).clamp(0.0, (h - 1) as f64);
@@ -122,16 +216,14 @@ fn bilinear1(img: &[f32], w: usize, h: usize, x: f64, y: f64) -> f32 {
     let y1 = (y0 + 1).min(h - 1);
     let ax = (fx - x0 as f64) as f32;
     let ay = (fy - y0 as f64) as f32;
-    let top = img[y0 * w + x0] * (1.0 - ax) + img[y0 * w + x1] * ax;
-    let bot = img[y1 * w + x0] * (1.0 - ax) + img[y1 * w + x1] * ax;
+    let top = at(y0 * w + x0) * (1.0 - ax) + at(y0 * w + x1) * ax;
+    let bot = at(y1 * w + x0) * (1.0 - ax) + at(y1 * w + x1) * ax;
     top * (1.0 - ay) + bot * ay
 }
 
 /// Edge points on rays walked inwards from the frame edge towards `centre`.
 fn boundary_points(
-    img: &[f32],
-    w: usize,
-    h: usize,
+    img: &Blurred,
     centre: (f64, f64),
     housing: f32,
     threshold: f32,
@@ -139,7 +231,7 @@ fn boundary_points(
     const RAYS: usize = 720;
     const STEP: f64 = 0.5;
     let (cx, cy) = centre;
-    let (wf, hf) = (w as f64, h as f64);
+    let (wf, hf) = (img.w as f64, img.h as f64);
     let mut pts = Vec::with_capacity(RAYS);
     let mut profile = Vec::new();
     for i in 0..RAYS {
@@ -171,7 +263,7 @@ fn boundary_points(
         let mut first = None;
         for k in 0..=n {
             let t = t_edge - k as f64 * STEP;
-            let v = bilinear1(img, w, h, cx + t * dx, cy + t * dy);
+            let v = bilinear1(img, cx + t * dx, cy + t * dy);
             profile.push(v);
             if first.is_none() && v > threshold {
                 first = Some(k);

@@ -59,6 +59,7 @@ mod fit;
 mod flat_field;
 mod projection;
 
+pub(crate) use circle::detect_circle_rgb8;
 pub use circle::{detect_circle, detect_circle_luma, CircleFit};
 pub use crop::{crop_dome, DomeCrop};
 pub use fit::{fit_projection, parse_angle_radius_csv, AngleRadius, LensFit, ModelFit};

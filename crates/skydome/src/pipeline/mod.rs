@@ -894,7 +894,23 @@ fn lens_profile(
 
 /// Detects the image circle on the best-exposed frame (see [`bracket::best_exposed_u8`]).
 pub fn detect_circle(br: &Bracket) -> Result<CircleFit, PipelineError> {
-    detect_circle_in(&br.frames).map(|(fit, _)| fit)
+    let failed = |e: fisheye::FisheyeError| PipelineError::CircleNotFound {
+        frame: br
+            .frames
+            .first()
+            .map_or_else(String::new, |f| f.name.clone()),
+        reason: e.to_string(),
+    };
+    match bracket::best_exposed(&br.frames) {
+        // 8-bit frames are read where they are; 16-bit ones binned to a copy.
+        Some(bracket::Frame {
+            pixels: bracket::Pixels::U8(rgb),
+            width,
+            height,
+            ..
+        }) => fisheye::detect_circle_rgb8(rgb, *width, *height).map_err(failed),
+        _ => detect_circle_in(&br.frames).map(|(fit, _)| fit),
+    }
 }
 
 /// Detects the image circle in one photo or a bracket, on the best-exposed frame, and returns
