@@ -636,8 +636,8 @@ pub fn horizontal_irradiance_fisheye(img: &HdrImage, geom: &SkyGeometry) -> [f64
     let proj = *geom.projection();
     let (cx, cy) = geom.centre();
     let r90 = proj.radius(std::f64::consts::FRAC_PI_2);
-    let hw = HorizontalWeight::new(&proj);
-    let weight = |dx: f64, dy: f64| hw.at(dx.hypot(dy));
+    let table = HorizontalWeight::new(&proj).table();
+    let weight = |dx: f64, dy: f64| table.at((dx * dx + dy * dy).sqrt());
     let y0 = (cy - r90 - 1.0).floor().max(0.0) as usize;
     let y1 = ((cy + r90 + 1.0).ceil().max(0.0) as usize).min(img.height);
     let x0 = (cx - r90 - 1.0).floor().max(0.0) as usize;
@@ -647,7 +647,7 @@ pub fn horizontal_irradiance_fisheye(img: &HdrImage, geom: &SkyGeometry) -> [f64
         let dy = y as f64 + 0.5 - cy;
         for x in x0..x1 {
             let dx = x as f64 + 0.5 - cx;
-            let rho = dx.hypot(dy);
+            let rho = (dx * dx + dy * dy).sqrt();
             let w = if (rho - r90).abs() < 0.75 {
                 // Split pixels cut by the horizon.
                 let mut s = 0.0;
@@ -712,6 +712,18 @@ impl HorizontalWeight {
         }
     }
 
+    /// The weight tabulated at [`RadialTable::NODES`] even steps of `rho` out to the horizon.
+    pub(crate) fn table(&self) -> RadialTable {
+        let step = self.r90 / RadialTable::NODES as f64;
+        RadialTable {
+            values: (0..=RadialTable::NODES + 1)
+                .map(|i| self.at(i as f64 * step))
+                .collect(),
+            per_px: 1.0 / step,
+            r90: self.r90,
+        }
+    }
+
     /// The weight at `rho` pixels from the optical centre.
     #[inline]
     pub(crate) fn at(&self, rho: f64) -> f64 {
@@ -725,6 +737,37 @@ impl HorizontalWeight {
             Some(t) => t.cos() * t.sin() / (rho * self.proj.derivative(t)),
             None => 0.0,
         }
+    }
+}
+
+/// [`HorizontalWeight`] tabulated along the radius and interpolated linearly: per pixel a look-up
+/// instead of an arctangent, a sine, two cosines and the lens's derivative, which made the
+/// illuminance integral cost as much as decoding a frame. The weight is smooth in `rho` (and
+/// zero beyond the horizon, where it reaches zero continuously), so the error is below 1e-7 of
+/// the centre's weight (tested against [`HorizontalWeight::at`]).
+pub(crate) struct RadialTable {
+    values: Vec<f64>,
+    /// Nodes per pixel.
+    per_px: f64,
+    r90: f64,
+}
+
+impl RadialTable {
+    /// Steps from the centre to the horizon (which is a node: the weight's kink there is not
+    /// interpolated across). The error scales as the square of the step over the radius.
+    const NODES: usize = 1 << 14;
+
+    /// The interpolated weight at `rho` pixels from the optical centre (0 beyond the horizon).
+    #[inline]
+    pub(crate) fn at(&self, rho: f64) -> f64 {
+        if !(rho <= self.r90) {
+            return 0.0;
+        }
+        let u = rho * self.per_px;
+        // Non-negative, so truncation is the floor.
+        let i = (u as usize).min(Self::NODES);
+        let f = u - i as f64;
+        self.values[i] + f * (self.values[i + 1] - self.values[i])
     }
 }
 
@@ -756,4 +799,43 @@ pub fn horizontal_irradiance_equirect(img: &HdrImage) -> [f64; 3] {
         }
     }
     acc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_radial_table_follows_the_weight_formula() {
+        // Every lens model, fields of view from 120° to 280° (the lens's own limit inside the
+        // horizon included), small and large circles.
+        for kind in [
+            LensKind::Equidistant,
+            LensKind::Equisolid,
+            LensKind::Stereographic,
+            LensKind::Orthographic,
+        ] {
+            for (fov, r) in [
+                (180.0, 40.0),
+                (235.0, 1731.0),
+                (120.0, 800.0),
+                (280.0, 3000.0),
+            ] {
+                let Ok(proj) = Projection::from_fov(kind, fov, r) else {
+                    continue;
+                };
+                let hw = HorizontalWeight::new(&proj);
+                let table = hw.table();
+                let scale = hw.at(0.0);
+                let r90 = proj.radius(std::f64::consts::FRAC_PI_2);
+                let mut worst = 0.0f64;
+                for k in 0..20_000 {
+                    let rho = r90 * 1.001 * f64::from(k) / 20_000.0 + 0.0371;
+                    let err = (table.at(rho) - hw.at(rho)).abs() / scale;
+                    worst = worst.max(err);
+                }
+                assert!(worst < 1e-7, "{kind:?} {fov}° r {r}: {worst:e}");
+            }
+        }
+    }
 }
