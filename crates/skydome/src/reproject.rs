@@ -760,7 +760,7 @@ impl RadialTable {
     /// The interpolated weight at `rho` pixels from the optical centre (0 beyond the horizon).
     #[inline]
     pub(crate) fn at(&self, rho: f64) -> f64 {
-        if !(rho <= self.r90) {
+        if rho.is_nan() || rho > self.r90 {
             return 0.0;
         }
         let u = rho * self.per_px;
