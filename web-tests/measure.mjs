@@ -6,11 +6,12 @@
 //   node measure.mjs [--size 3464] [--out results.json]
 // Speed is measured here, never asserted in tests.
 import { execFileSync } from 'node:child_process';
-import { readFileSync, readdirSync, writeFileSync } from 'node:fs';
+import { existsSync, readFileSync, readdirSync, writeFileSync } from 'node:fs';
 import path from 'node:path';
+import { fileURLToPath } from 'node:url';
 import { gzipSync } from 'node:zlib';
 import {
-  appDir, onScreen, phone, resultOrError, serve, setSettings, skydomeBin, tempDir,
+  appDir, onScreen, phone, resultOrError, serve, setSettings, tempDir,
 } from './tests/support.mjs';
 
 const arg = (name, dflt) => {
@@ -51,16 +52,21 @@ function tabPeak() {
   return [...peaks.values()].reduce((a, b) => (b.rss > a.rss ? b : a), { rss: 0, anon: 0 });
 }
 
+// The native side of the comparison is the optimised build (a debug CLI would flatter the
+// browser): $SKYDOME_BIN, else target/release/skydome.
+const cliBin = process.env.SKYDOME_BIN
+  || path.join(path.dirname(fileURLToPath(import.meta.url)), '..', 'target', 'release', 'skydome');
+if (!existsSync(cliBin)) throw new Error(`${cliBin} is missing: run cargo build --release -p skydome-cli`);
 const dir = tempDir('measure');
 console.error(`synthesising a ${size}² bracket in ${dir}`);
-execFileSync(skydomeBin(), ['synth', '-o', dir, '--size', String(size), '--quiet']);
+execFileSync(cliBin, ['synth', '-o', dir, '--size', String(size), '--quiet']);
 const frames = readdirSync(dir).filter((f) => /^frame_\d+\.jpg$/.test(f)).sort().map((f) => path.join(dir, f));
 
 const cliArgs = ['merge', ...frames, '--times-file', path.join(dir, 'times.txt'), '--fisheye',
   '--lens-model', 'stereographic', '--fov', '235', '--crop', '--north', '0', '--sun', 'auto',
   '--preview', path.join(dir, 'cli.jpg'), '-o', path.join(dir, 'cli.hdr'), '--quiet', '--force'];
 const c0 = performance.now();
-execFileSync(skydomeBin(), cliArgs);
+execFileSync(cliBin, cliArgs);
 const cliMs = performance.now() - c0;
 
 const server = await serve();
@@ -91,6 +97,7 @@ try {
   const peak = tabPeak();
   const metrics = Object.fromEntries((await cdp.send('Performance.getMetrics')).metrics.map((m) => [m.name, m.value]));
   const core = await p.page.evaluate(() => window.__skydomeCoreMs);
+  const stages = await p.page.evaluate(() => window.__skydomeStageMs);
   const wasm = await p.page.evaluate(() => window.__skydomeAsk('memory'));
   const gz = gzipSync(readFileSync(path.join(appDir, 'pkg/skydome_web_bg.wasm')), { level: 9 }).length;
   const raw = readFileSync(path.join(appDir, 'pkg/skydome_web_bg.wasm')).length;
@@ -99,8 +106,9 @@ try {
     megapixels_each: (size * size) / 1e6,
     browser_core_s: core / 1000,
     browser_wall_s: wallMs / 1000,
+    browser_stage_s: Object.fromEntries(Object.entries(stages).map(([k, v]) => [k, v / 1000])),
     cli_s: cliMs / 1000,
-    cli_binary: skydomeBin(),
+    cli_binary: cliBin,
     tab_peak_rss_mb: peak.rss / 2 ** 20,
     tab_peak_own_mb: peak.anon / 2 ** 20,
     tab_peak_shmem_mb: peak.shmem / 2 ** 20,

@@ -236,6 +236,7 @@ async function afterRun(result) {
   showFacts(result);
   show('result');
   window.__skydomeCoreMs = result.ms; // read by web-tests/measure.mjs
+  window.__skydomeStageMs = result.stages;
   document.body.dataset.ready = String(Date.now());
 }
 

@@ -23,10 +23,23 @@ function sentence(err) {
 function runJob(id, optionsJson, times) {
   if (outcome) { outcome.free(); outcome = null; }
   const t0 = performance.now();
+  // Milliseconds spent in each stage (from its first progress event to the next stage's), for
+  // web-tests/measure.mjs.
+  const stages = {};
+  let current = null;
+  let since = t0;
+  const mark = (next) => {
+    const now = performance.now();
+    if (current) stages[current] = (stages[current] || 0) + (now - since);
+    current = next;
+    since = now;
+  };
   outcome = job.run(optionsJson, new Float64Array(times || []), (stage, fraction) => {
+    if (stage !== current) mark(stage);
     postMessage({ id, progress: { stage, fraction } });
     return false; // cancelling is done by terminating this worker (see app.js)
   });
+  mark(null);
   return {
     report: JSON.parse(outcome.report_json()),
     width: outcome.width(),
@@ -34,6 +47,7 @@ function runJob(id, optionsJson, times) {
     camera_profile: outcome.camera_profile_json(),
     lens_profile: outcome.lens_profile_json(),
     ms: performance.now() - t0,
+    stages,
   };
 }
 

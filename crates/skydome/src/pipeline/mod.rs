@@ -528,10 +528,13 @@ pub fn run(
     // Black pixels and disagreement are judged inside the lens circle when there is one (the
     // housing outside is black in every frame by design).
     let area: Option<Vec<bool>> = lens.as_ref().map(|(l, _)| {
-        let w = br.width();
-        (0..w * br.height())
-            .map(|i| l.circle.contains_pixel(i % w, i / w))
-            .collect()
+        // Row by row: no division per pixel.
+        let (w, h) = (br.width(), br.height());
+        let mut a = Vec::with_capacity(w * h);
+        for y in 0..h {
+            a.extend((0..w).map(|x| l.circle.contains_pixel(x, y)));
+        }
+        a
     });
     warnings.extend(merged.warnings(area.as_deref()));
     let inconsistent_fraction = merged
