@@ -212,7 +212,13 @@ impl Outcome {
 
     /// The tone-mapped preview (or, with `overlay`, the overlay picture) as JPEG.
     pub fn picture_jpeg(&self, overlay: bool) -> Result<Vec<u8>, WebError> {
+        // The overlay is made now when the run did not make it.
+        let made;
         let (pic, what) = match overlay {
+            true if self.dome.overlay.is_none() => {
+                made = self.dome.overlay_picture().map_err(WebError::Pipeline)?;
+                (&made, "the overlay picture")
+            }
             true => (&self.dome.overlay, "the overlay picture"),
             false => (&self.dome.preview, "the preview"),
         };
@@ -438,6 +444,65 @@ pub fn times_from_list(
 #[wasm_bindgen]
 pub fn list_times(list_name: &str, text: &str, names: Vec<String>) -> Result<Vec<f64>, JsError> {
     Ok(times_from_list(list_name, text, &names)?)
+}
+
+/// Runs the whole pipeline once on a tiny synthetic fish-eye bracket (`skydome::synth`,
+/// `size`² pixels, JPEG frames) with the app's products (sky stage, preview, `.hdr` and JPEG
+/// encoding).
+///
+/// Why: browsers compile WebAssembly twice, first quickly into slow code, then the functions
+/// that turn out hot into optimised code, and a function switches only on its next call. The
+/// pipeline calls each of its loops once per merge, so without this the first merge of a session
+/// ran its big loops in the slow code (in Node's V8, 795 ms instead of 512 for 3 × 12 MP). The
+/// worker calls this once after loading, while the user frames the shot.
+pub fn warm_up(size: usize) -> Result<(), WebError> {
+    use skydome::bracket::Pixels;
+    use skydome::synth::{generate, SynthOptions};
+    let b = generate(&SynthOptions {
+        width: size,
+        height: size,
+        fisheye: true,
+        jpeg_quality: None,
+        ..SynthOptions::default()
+    })
+    .map_err(|e| WebError::Encode(e.to_string()))?;
+    let mut frames = Vec::with_capacity(b.frames.len());
+    let mut times = Vec::with_capacity(b.frames.len());
+    for (i, f) in b.frames.into_iter().enumerate() {
+        times.push(f.exposure.time_s);
+        let Pixels::U8(data) = f.pixels else {
+            return Err(WebError::Missing("an 8-bit synthetic frame"));
+        };
+        let img = skydome::image::RgbImage::from_vec(f.width, f.height, data)
+            .ok_or(WebError::Missing("a synthetic frame of the stated size"))?;
+        let bytes = encode_rgb8(
+            &img,
+            PictureFormat::Jpeg {
+                quality: DEFAULT_JPEG_QUALITY,
+            },
+        )
+        .map_err(|e| WebError::Encode(e.to_string()))?;
+        frames.push(EncodedFrame {
+            name: format!("warm-up {i}.jpg"),
+            bytes,
+        });
+    }
+    let options = parse_options(
+        r#"{"lens": {"detect": {"model": "stereographic", "fov_deg": 235, "circle": null}},
+            "sky": {"crop": true, "north_deg": 0, "sun": "auto"}, "products": {"preview": true}}"#,
+    )?;
+    let outcome = Outcome::from_dome(run_frames(frames, Some(times), &options, &mut |_, _| {
+        false
+    })?);
+    outcome.hdr_bytes()?;
+    outcome.picture_jpeg(false)?;
+    Ok(())
+}
+
+/// [`warm_up`] for the page: call once after loading (a 256² bracket takes about 0.1 s).
+#[wasm_bindgen(js_name = warm_up)]
+pub fn warm_up_js(size: usize) -> Result<(), JsError> {
+    Ok(warm_up(size)?)
 }
 
 /// The library's version (`SOFTWARE=skydome <version>` in headers).

@@ -121,3 +121,35 @@ fn times_list_names_the_missing_file() {
         "times.txt: no exposure time for b.jpg."
     );
 }
+
+/// The warm-up the worker runs after loading goes through the whole pipeline without error (a
+/// failure here would show as a broken first merge only in the browser).
+#[test]
+fn warm_up_runs_the_pipeline_on_a_small_synthetic_bracket() {
+    skydome_web::warm_up(256).expect("warm-up");
+    assert!(skydome_web::warm_up(8).is_err(), "too small for a bracket");
+}
+
+/// The overlay picture made on request after a run that did not make it is the run's own.
+#[test]
+fn overlay_on_request_is_the_runs_overlay() {
+    let (frames, times) = demo();
+    let json = |overlay: bool| {
+        format!(
+            r#"{{"lens": {{"detect": {{"model": "stereographic", "fov_deg": 235, "circle": null}}}},
+                "sky": {{"crop": true, "north_deg": 37, "sun": "auto"}},
+                "products": {{"preview": true, "overlay": {overlay}}}}}"#
+        )
+    };
+    let run = |overlay: bool| {
+        let o = parse_options(&json(overlay)).expect("options");
+        Outcome::from_dome(
+            run_frames(frames.clone(), Some(times.clone()), &o, &mut |_, _| false).expect("run"),
+        )
+    };
+    let (made, later) = (run(true), run(false));
+    assert!(made.dome().overlay.is_some() && later.dome().overlay.is_none());
+    let a = made.picture_jpeg(true).expect("overlay");
+    assert_eq!(a, later.picture_jpeg(true).expect("overlay on request"));
+    assert_ne!(a, later.picture_jpeg(false).expect("preview"));
+}

@@ -153,7 +153,8 @@ async function buildOptions({ tap = null, time = null } = {}) {
       time,
     };
     if (place) Object.assign(o.sky, place);
-    o.products.overlay = true;
+    // The overlay picture is not made here: nothing on screen shows it, and the worker makes it
+    // on request (a whole tone map of the dome less per merge).
     if (settings.equirect) o.products.equirect = {};
   }
   return o;

@@ -5,9 +5,18 @@
 // then {id, result} or {id, error: 'One human sentence.'}.
 import init, {
   Job, detect_circle, photo_exposure, check_camera_profile, check_lens_profile, live_overlay, list_times, version,
+  warm_up,
 } from './pkg/skydome_web.js';
 
 const ready = init();
+// Once loaded, the core merges a tiny synthetic bracket (about 0.1 s) so the browser compiles
+// its loops into optimised code before the user's first merge (see skydome_web::warm_up);
+// skipped when a merge came first.
+let merged = false;
+ready.then(() => setTimeout(() => {
+  if (merged) return;
+  try { warm_up(256); warm_up(256); } catch (err) { console.warn(`warm-up: ${sentence(err)}`); }
+}, 0));
 let job = null;      // the photos of the current bracket (kept for a second run, e.g. a tapped sun)
 let outcome = null;  // the last run's products, encoded on demand
 
@@ -21,6 +30,7 @@ function sentence(err) {
 }
 
 function runJob(id, optionsJson, times) {
+  merged = true;
   if (outcome) { outcome.free(); outcome = null; }
   const t0 = performance.now();
   // Milliseconds spent in each stage (from its first progress event to the next stage's), for

@@ -23,6 +23,8 @@
 
 use std::io::Cursor;
 
+#[cfg(feature = "parallel")]
+use rayon::prelude::*;
 use thiserror::Error;
 
 /// Pixel samples of one decoded frame: interleaved RGB, row-major, origin top-left.
@@ -42,7 +44,14 @@ impl Pixels {
     /// address, keeping at most 2 MiB more: where the kernel backs the buffer with transparent
     /// huge pages (as the command line asks), the freed part is then whole huge pages, returned
     /// at once, rather than the tail of one, which Linux holds until it splits the page later.
+    ///
+    /// On wasm32 only `len == 0` does anything: a WebAssembly memory never shrinks, and its
+    /// allocator cannot shrink a large block in place, so a partial release would copy the part
+    /// kept to a new block (in the browser it doubled the merge's time) and return nothing.
     pub(crate) fn release_from(&mut self, len: usize) {
+        if cfg!(target_arch = "wasm32") && len != 0 {
+            return;
+        }
         fn release<T>(v: &mut Vec<T>, len: usize) {
             const HUGE_PAGE: usize = 2 << 20;
             let keep = if len == 0 {
@@ -951,9 +960,41 @@ pub fn assemble(
     // left out with a warning, as long as two frames remain.
     let floor = black_floor(&frames);
     let total = frames.len();
+    // Every frame's informative samples and every neighbouring pair's comparison in one go (in
+    // parallel with the `parallel` feature): each is a pass over frames too big for the cache,
+    // so they are run side by side rather than one after another. The pairs are compared again
+    // only when a frame is left out (rare), which makes new neighbours.
+    let compare_all = |frames: &[Frame]| -> Vec<PairCheck> {
+        let pairs: Vec<(&Frame, &Frame)> = frames.windows(2).map(|p| (&p[0], &p[1])).collect();
+        #[cfg(feature = "parallel")]
+        let checks = pairs
+            .par_iter()
+            .map(|&(a, b)| compare_pair(a, b, floor))
+            .collect();
+        #[cfg(not(feature = "parallel"))]
+        let checks = pairs
+            .iter()
+            .map(|&(a, b)| compare_pair(a, b, floor))
+            .collect();
+        checks
+    };
+    let count_all = |frames: &[Frame]| -> Vec<usize> {
+        #[cfg(feature = "parallel")]
+        let counts = frames
+            .par_iter()
+            .map(|f| informative_count(f, floor))
+            .collect();
+        #[cfg(not(feature = "parallel"))]
+        let counts = frames.iter().map(|f| informative_count(f, floor)).collect();
+        counts
+    };
+    #[cfg(feature = "parallel")]
+    let (counts, checks) = rayon::join(|| count_all(&frames), || compare_all(&frames));
+    #[cfg(not(feature = "parallel"))]
+    let (counts, checks) = (count_all(&frames), compare_all(&frames));
     let mut kept = Vec::with_capacity(total);
-    for f in frames {
-        if informative_count(&f, floor) < informative_needed(&f) {
+    for (f, count) in frames.into_iter().zip(counts) {
+        if count < informative_needed(&f) {
             warnings.push(format!(
                 "{}: almost every pixel is at the black level or clipped, so the frame adds nothing to the bracket; it was left out",
                 f.name
@@ -966,9 +1007,13 @@ pub fn assemble(
         return Err(BracketError::TooFewFrames(kept.len()));
     }
     let frames = kept;
-    for pair in frames.windows(2) {
+    let checks = match frames.len() == total {
+        true => checks,
+        false => compare_all(&frames),
+    };
+    for (pair, check) in frames.windows(2).zip(&checks) {
         let (a, b) = (&pair[0], &pair[1]);
-        if nearly_identical(a, b, floor) {
+        if check.identical {
             return Err(BracketError::IdenticalPixels {
                 file: b.name.clone(),
                 other: a.name.clone(),
@@ -976,9 +1021,9 @@ pub fn assemble(
             });
         }
     }
-    for pair in frames.windows(2) {
+    for (pair, check) in frames.windows(2).zip(&checks) {
         let (a, b) = (&pair[0], &pair[1]);
-        if darker_when_longer(a, b) {
+        if check.darker_when_longer {
             return Err(BracketError::DarkerWhenLonger {
                 file: b.name.clone(),
                 e1: describe(&b.exposure),
@@ -1173,58 +1218,56 @@ fn informative_needed(f: &Frame) -> usize {
     }
 }
 
-/// True when two frames carry (nearly) the same picture: over the values informative in both
-/// (neither at the black level nor clipped), the mean brightness differs by less than 2 % and
-/// the mean absolute difference is below 1.5 % of full scale. Frames that genuinely differ by
-/// ≥ 1/6 stop differ by ≥ 12 % in linear terms, which even a strong tone curve does not squeeze
-/// below 2 %. Judging only informative values matters: a mostly black frame (a film scan's
-/// black level, a short exposure at night) is identical to its neighbour *where both are
-/// black*, which says nothing about the exposure. Samples every 7th pixel.
-fn nearly_identical(a: &Frame, b: &Frame, floor: f32) -> bool {
-    let n = a.pixels.len().min(b.pixels.len());
-    let (mut sa, mut sb, mut sad, mut count) = (0f64, 0f64, 0f64, 0usize);
-    let mut i = 0;
-    while i + 2 < n {
-        for c in 0..3 {
-            let (va, vb) = (a.pixels.unit(i + c), b.pixels.unit(i + c));
-            if !(informative(va, floor) && informative(vb, floor)) {
-                continue;
-            }
-            sa += f64::from(va);
-            sb += f64::from(vb);
-            sad += f64::from((va - vb).abs());
-            count += 1;
-        }
-        i += 21;
-    }
-    // Too few usable samples (frames almost all black or white): nothing to compare.
-    if count < n / 21 / 100 + 10 {
-        return false;
-    }
-    let (ma, mb) = (sa / count as f64, sb / count as f64);
-    (ma - mb).abs() < 0.02 * ma.max(mb) && sad / (count as f64) < 0.015
+/// What comparing two neighbouring frames of a bracket (`a` exposed shorter than `b`) found.
+struct PairCheck {
+    /// The two frames carry (nearly) the same picture: over the values informative in both
+    /// (neither at the black level nor clipped), the mean brightness differs by less than 2 %
+    /// and the mean absolute difference is below 1.5 % of full scale. Frames that genuinely
+    /// differ by ≥ 1/6 stop differ by ≥ 12 % in linear terms, which even a strong tone curve
+    /// does not squeeze below 2 %. Judging only informative values matters: a mostly black frame
+    /// (a film scan's black level, a short exposure at night) is identical to its neighbour
+    /// *where both are black*, which says nothing about the exposure.
+    identical: bool,
+    /// `b`, exposed longer, is clearly darker at most samples where the two differ clearly (by
+    /// more than 3 % of the code range): a code never falls as exposure grows, so the times
+    /// must belong to other photos. Noise, JPEG and a little motion make a few samples darker
+    /// in any real bracket; a majority needs swapped times.
+    darker_when_longer: bool,
 }
 
-/// True when `b`, exposed longer than `a`, is clearly darker at most pixels where the two
-/// differ clearly (by more than 3 % of the code range): a code never falls as exposure grows,
-/// so the times must belong to other photos. Noise, JPEG and a little motion make a few
-/// pixels darker in any real bracket; a majority needs swapped times.
-fn darker_when_longer(a: &Frame, b: &Frame) -> bool {
+/// Compares two frames on the samples of every 7th pixel, in one pass over both.
+fn compare_pair(a: &Frame, b: &Frame, floor: f32) -> PairCheck {
     let n = a.pixels.len().min(b.pixels.len());
+    let (mut sa, mut sb, mut sad, mut count) = (0f64, 0f64, 0f64, 0usize);
     let (mut darker, mut brighter) = (0usize, 0usize);
     let mut i = 0;
     while i + 2 < n {
         for c in 0..3 {
-            let d = b.pixels.unit(i + c) - a.pixels.unit(i + c);
+            let (va, vb) = (a.pixels.unit(i + c), b.pixels.unit(i + c));
+            let d = vb - va;
             if d < -0.03 {
                 darker += 1;
             } else if d > 0.03 {
                 brighter += 1;
             }
+            if informative(va, floor) && informative(vb, floor) {
+                sa += f64::from(va);
+                sb += f64::from(vb);
+                sad += f64::from((va - vb).abs());
+                count += 1;
+            }
         }
         i += 21;
     }
-    darker >= 100 && darker > brighter
+    // Too few usable samples (frames almost all black or white): nothing to compare.
+    let identical = count >= n / 21 / 100 + 10 && {
+        let (ma, mb) = (sa / count as f64, sb / count as f64);
+        (ma - mb).abs() < 0.02 * ma.max(mb) && sad / (count as f64) < 0.015
+    };
+    PairCheck {
+        identical,
+        darker_when_longer: darker >= 100 && darker > brighter,
+    }
 }
 
 /// Applies EXIF orientation `o` (2..=8) to interleaved RGB samples.

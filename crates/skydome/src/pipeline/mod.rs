@@ -438,8 +438,10 @@ pub struct Dome {
     pub angular: Option<(HdrImage, HdrMeta)>,
     /// The tone-mapped preview, when asked.
     pub preview: Option<RgbImage<u8>>,
-    /// The overlay picture, when asked.
+    /// The overlay picture, when asked (else [`Dome::overlay_picture`] makes it later).
     pub overlay: Option<RgbImage<u8>>,
+    /// What the overlay draws (output pixels), when there was a lens.
+    pub marks: Option<crate::overlay::OverlayMarks>,
     /// The confidence picture (grey, black = no frame well exposed), when asked.
     pub confidence: Option<RgbImage<u8>>,
     /// The consistency picture (white = frames disagree beyond their noise), when asked.
@@ -645,13 +647,9 @@ pub fn run(
         true => Some(tonemap::tonemap_u8(&radiance, &default_tonemap(None))?),
         false => None,
     };
-    let overlay = match (options.products.overlay, &marks) {
-        (true, Some(m)) => Some(crate::overlay::overlay_picture(
-            &radiance,
-            m,
-            &default_tonemap(m.visible),
-        )?),
-        _ => None,
+    let overlay = match options.products.overlay {
+        true => overlay_of(&radiance, marks.as_ref())?,
+        false => None,
     };
     p.at(Stage::Pictures, 1.0)?;
 
@@ -679,11 +677,35 @@ pub fn run(
         angular,
         preview,
         overlay,
+        marks,
         confidence,
         consistency,
         camera_profile,
         lens_profile,
         report,
+    })
+}
+
+impl Dome {
+    /// The overlay picture ([`Products::overlay`]), made now from the radiance and the marks:
+    /// the same picture [`run`] makes when asked, for a caller that makes it only if it is
+    /// wanted (the phone, when the user saves it). `None` without a lens (nothing to mark).
+    pub fn overlay_picture(&self) -> Result<Option<RgbImage<u8>>, PipelineError> {
+        overlay_of(&self.radiance, self.marks.as_ref())
+    }
+}
+
+fn overlay_of(
+    radiance: &HdrImage,
+    marks: Option<&crate::overlay::OverlayMarks>,
+) -> Result<Option<RgbImage<u8>>, PipelineError> {
+    Ok(match marks {
+        Some(m) => Some(crate::overlay::overlay_picture(
+            radiance,
+            m,
+            &default_tonemap(m.visible),
+        )?),
+        None => None,
     })
 }
 

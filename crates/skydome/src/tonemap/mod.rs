@@ -355,9 +355,10 @@ fn srgb_lut() -> &'static [f32; LUT_SIZE + 1] {
 #[inline(always)]
 fn srgb255(x: f32) -> f32 {
     const KNEE: f32 = 0.003_130_8;
-    let x = x.clamp(0.0, 1.0);
+    use crate::fastmath::{clamp, exp2, log2, max};
+    let x = clamp(x, 0.0, 1.0);
     let linear = (255.0 * 12.92) * x;
-    let pow = crate::fastmath::exp2(crate::fastmath::log2(x.max(KNEE)) * (1.0 / 2.4));
+    let pow = exp2(log2(max(x, KNEE)) * (1.0 / 2.4));
     let encoded = (255.0 * 1.055) * pow - 255.0 * 0.055;
     if x <= KNEE {
         linear
@@ -755,7 +756,7 @@ fn map_row_u8(
         for (i, px) in p.chunks_exact(3).enumerate() {
             for c in 0..3 {
                 // `max` drops NaN in favour of 0 and clamps negatives.
-                rgb[c][i] = px[c].max(0.0);
+                rgb[c][i] = crate::fastmath::max(px[c], 0.0);
             }
         }
         let mut l = [0.0f32; BLOCK];
@@ -774,7 +775,7 @@ fn map_row_u8(
         for i in 0..BLOCK {
             let ld = s[i] * l[i];
             let v = [rgb[0][i] * s[i], rgb[1][i] * s[i], rgb[2][i] * s[i]];
-            let m = v[0].max(v[1]).max(v[2]);
+            let m = crate::fastmath::max(crate::fastmath::max(v[0], v[1]), v[2]);
             let t = if m > 1.0 { (1.0 - ld) / (m - ld) } else { 1.0 };
             // White from display luminance 1 up, and for NaN (infinite luminance).
             let white = ld >= 1.0 || ld.is_nan();
@@ -794,7 +795,9 @@ fn map_row_u8(
         for c in 0..3 {
             for i in 0..BLOCK {
                 // Black (zero luminance) stays black: its code is 0 + offset < 1.
-                codes[c][i] = (q[c][i] + off[c][i]).clamp(0.0, 255.0) as u8;
+                // Through i32 (exact: the value is in 0..=255), which converts four lanes at a
+                // time on wasm as on x86; a direct `as u8` is converted lane by lane on wasm.
+                codes[c][i] = crate::fastmath::clamp(q[c][i] + off[c][i], 0.0, 255.0) as i32 as u8;
             }
         }
         for (i, px) in o.chunks_exact_mut(3).enumerate() {
