@@ -723,13 +723,9 @@ pub fn detect_sun_luma(
         }
     };
     let blurred = region_box_mean(luma, width, (x0, y0, bw, bh), region, b);
-    let mut values: Vec<f32> = blurred.iter().copied().filter(|v| !v.is_nan()).collect();
-    if values.len() < 16 {
+    let Some((background, peak)) = median_and_peak(&blurred) else {
         return Ok(None);
-    }
-    let mid = values.len() / 2;
-    let background = *values.select_nth_unstable_by(mid, f32::total_cmp).1;
-    let peak = values.iter().copied().fold(0.0f32, f32::max);
+    };
     let bg = background.max(peak * 1e-9).max(f32::MIN_POSITIVE);
     let ratio = f64::from(peak / bg);
     if !(peak > 0.0 && ratio >= 2.0) {
@@ -820,6 +816,41 @@ pub fn detect_sun_luma(
         area_px: members.len(),
         peak_to_background: ratio,
     }))
+}
+
+/// The median (the `n/2`-th smallest, as `select_nth_unstable`) and the largest of the
+/// non-NaN values (all non-negative and finite here), or `None` for fewer than 16.
+///
+/// Exact, in two passes instead of a copy and a selection of millions of values: for
+/// non-negative floats the bit patterns sort as the values do, so a histogram of the top 16
+/// bits finds the bin holding the median, and only that bin's values are selected among.
+fn median_and_peak(values: &[f32]) -> Option<(f32, f32)> {
+    let mut hist = vec![0u32; 1 << 16];
+    let (mut n, mut peak) = (0usize, 0.0f32);
+    for &v in values.iter().filter(|v| !v.is_nan()) {
+        hist[(v.to_bits() >> 16) as usize] += 1;
+        n += 1;
+        peak = crate::fastmath::max(v, peak);
+    }
+    if n < 16 {
+        return None;
+    }
+    let mut rank = n / 2;
+    let mut bin = 0;
+    for (b, &count) in hist.iter().enumerate() {
+        if rank < count as usize {
+            bin = b as u32;
+            break;
+        }
+        rank -= count as usize;
+    }
+    let mut in_bin: Vec<f32> = values
+        .iter()
+        .copied()
+        .filter(|v| !v.is_nan() && v.to_bits() >> 16 == bin)
+        .collect();
+    let median = *in_bin.select_nth_unstable_by(rank, f32::total_cmp).1;
+    Some((median, peak))
 }
 
 /// Mean of the pixels of `region` in the `(2b + 1)²` window around each pixel of the box
@@ -1103,6 +1134,37 @@ mod tests {
             }
         }
         out
+    }
+
+    #[test]
+    fn median_by_histogram_is_the_selected_median() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        for n in [16usize, 17, 100, 4097, 100_000] {
+            for spread in [1.0f32, 1e-3, 1e6] {
+                let v: Vec<f32> = (0..n)
+                    .map(|i| {
+                        state ^= state << 13;
+                        state ^= state >> 7;
+                        state ^= state << 17;
+                        match i % 50 {
+                            0 => f32::NAN,
+                            1 => 0.0,
+                            // Ties: many equal values.
+                            2..=9 => 0.5 * spread,
+                            _ => (state % 1_000_000) as f32 / 1e6 * spread,
+                        }
+                    })
+                    .collect();
+                let mut finite: Vec<f32> = v.iter().copied().filter(|x| !x.is_nan()).collect();
+                let mid = finite.len() / 2;
+                let want = *finite.select_nth_unstable_by(mid, f32::total_cmp).1;
+                let peak = finite.iter().copied().fold(0.0f32, f32::max);
+                let want = (finite.len() >= 16).then_some((want, peak));
+                assert_eq!(median_and_peak(&v), want, "n {n} spread {spread}");
+            }
+        }
+        assert_eq!(median_and_peak(&[1.0; 15]), None);
+        assert_eq!(median_and_peak(&[f32::NAN; 40]), None);
     }
 
     #[test]
