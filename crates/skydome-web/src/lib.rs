@@ -16,7 +16,8 @@
 
 use std::ops::ControlFlow;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+use skydome::bracket::{CaptureInfo, DecodeOptions, DecodedFrame, Pixels};
 use skydome::fisheye::{LensKind, LensProfile};
 use skydome::formats::exr::ExrOptions;
 use skydome::formats::picture::{encode_rgb8, PictureFormat, DEFAULT_JPEG_QUALITY};
@@ -100,9 +101,44 @@ pub fn run_frames(
     options: &Options,
     progress: &mut dyn FnMut(&str, f64) -> bool,
 ) -> Result<Dome, WebError> {
+    run_input(Frames::Encoded(frames), times, options, progress)
+}
+
+/// [`run_frames`] on photos some of which were decoded already by other workers
+/// ([`decode_split`], then [`join_decoded`]); the rest are decoded here, in the same way
+/// ([`skydome::bracket::decode`]). The photos keep the order given.
+pub fn run_mixed(
+    frames: Vec<Photo>,
+    times: Option<Vec<f64>>,
+    options: &Options,
+    progress: &mut dyn FnMut(&str, f64) -> bool,
+) -> Result<Dome, WebError> {
+    let n = frames.len();
+    let mut decoded = Vec::with_capacity(n);
+    for (i, f) in frames.into_iter().enumerate() {
+        if progress("decoding", 0.99 * i as f64 / n as f64) {
+            return Err(WebError::Pipeline(PipelineError::Cancelled));
+        }
+        decoded.push(match f {
+            Photo::Decoded(d) => d,
+            Photo::Encoded(e) => {
+                skydome::bracket::decode(&e.name, &e.bytes, &DecodeOptions::default())
+                    .map_err(|err| WebError::Pipeline(err.into()))?
+            }
+        });
+    }
+    run_input(Frames::Decoded(decoded), times, options, progress)
+}
+
+fn run_input(
+    frames: Frames,
+    times: Option<Vec<f64>>,
+    options: &Options,
+    progress: &mut dyn FnMut(&str, f64) -> bool,
+) -> Result<Dome, WebError> {
     let input = Input {
         times,
-        ..Input::new(Frames::Encoded(frames))
+        ..Input::new(frames)
     };
     let mut forward = |p: &Progress| match progress(p.stage.name(), p.fraction) {
         true => ControlFlow::Break(()),
@@ -111,13 +147,133 @@ pub fn run_frames(
     pipeline::run(input, options, &mut forward).map_err(WebError::Pipeline)
 }
 
-/// A bracket being assembled by the page: photos are added one by one, then [`Job::run`] runs
-/// the pipeline. The photos stay in the job, so a second run (e.g. with a tapped sun) needs no
-/// second upload.
+/// One photo of a bracket as the page hands it over: its file's bytes, or decoded by a
+/// decoding worker.
+#[derive(Debug, Clone)]
+pub enum Photo {
+    /// The file's bytes (JPEG, PNG or TIFF), decoded in the run.
+    Encoded(EncodedFrame),
+    /// Decoded already ([`join_decoded`]).
+    Decoded(DecodedFrame),
+}
+
+/// Everything of a decoded photo but its pixels, as it crosses from the Web Worker that decoded
+/// it to the one that merges (the pixels travel apart, as bytes; see [`decode_split`]).
+#[derive(Debug, Serialize, Deserialize)]
+struct DecodedMeta {
+    name: String,
+    width: usize,
+    height: usize,
+    bits: u8,
+    exif_time_s: Option<f64>,
+    iso: Option<f64>,
+    f_number: Option<f64>,
+    info: CaptureInfo,
+    non_srgb_icc: Option<String>,
+}
+
+/// Decodes one photo with the pipeline's own decoder ([`skydome::bracket::decode`], default
+/// [`DecodeOptions`], as a run does) and splits it into its metadata as JSON and its samples as
+/// bytes (8-bit samples as they are, 16-bit ones little-endian), for a decoding worker to hand
+/// over without a copy. [`join_decoded`] puts it back together.
+pub fn decode_split(name: &str, bytes: &[u8]) -> Result<(String, Vec<u8>), WebError> {
+    let d = skydome::bracket::decode(name, bytes, &DecodeOptions::default())
+        .map_err(|e| WebError::Pipeline(e.into()))?;
+    let (bits, pixels) = match d.pixels {
+        Pixels::U8(v) => (8, v),
+        Pixels::U16(v) => (16, v.iter().flat_map(|s| s.to_le_bytes()).collect()),
+    };
+    let meta = DecodedMeta {
+        name: d.name,
+        width: d.width,
+        height: d.height,
+        bits,
+        exif_time_s: d.exif_time_s,
+        iso: d.iso,
+        f_number: d.f_number,
+        info: d.info,
+        non_srgb_icc: d.non_srgb_icc,
+    };
+    let json = serde_json::to_string(&meta).map_err(|e| WebError::Encode(e.to_string()))?;
+    Ok((json, pixels))
+}
+
+/// The decoded photo [`decode_split`] split. Errors when the parts do not belong together.
+pub fn join_decoded(meta_json: &str, pixels: Vec<u8>) -> Result<DecodedFrame, WebError> {
+    let m: DecodedMeta =
+        serde_json::from_str(meta_json).map_err(|e| WebError::Options(e.to_string()))?;
+    let expected = m
+        .width
+        .checked_mul(m.height)
+        .and_then(|n| n.checked_mul(3 * usize::from(m.bits / 8)));
+    if !matches!(m.bits, 8 | 16) || expected != Some(pixels.len()) {
+        return Err(WebError::Options(format!(
+            "{}: {} bytes of samples do not make a {}x{} {}-bit picture",
+            m.name,
+            pixels.len(),
+            m.width,
+            m.height,
+            m.bits
+        )));
+    }
+    let pixels = match m.bits {
+        8 => Pixels::U8(pixels),
+        _ => Pixels::U16(
+            pixels
+                .chunks_exact(2)
+                .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .collect(),
+        ),
+    };
+    Ok(DecodedFrame {
+        name: m.name,
+        width: m.width,
+        height: m.height,
+        pixels,
+        exif_time_s: m.exif_time_s,
+        iso: m.iso,
+        f_number: m.f_number,
+        info: m.info,
+        non_srgb_icc: m.non_srgb_icc,
+    })
+}
+
+/// A photo decoded in a decoding worker ([`decode_photo`]).
+#[wasm_bindgen]
+pub struct DecodedPhoto {
+    meta: String,
+    pixels: Vec<u8>,
+}
+
+#[wasm_bindgen]
+impl DecodedPhoto {
+    /// Its metadata, for [`Job::set_decoded`].
+    pub fn meta_json(&self) -> String {
+        self.meta.clone()
+    }
+
+    /// Its samples as bytes, for [`Job::set_decoded`]; moved out, so a second call is empty.
+    pub fn take_pixels(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.pixels)
+    }
+}
+
+/// Decodes one photo (JPEG, PNG or TIFF bytes; `name` is used in messages) in a decoding worker,
+/// so the photos of a bracket decode on several cores; see [`decode_split`].
+#[wasm_bindgen]
+pub fn decode_photo(name: String, bytes: Vec<u8>) -> Result<DecodedPhoto, JsError> {
+    let (meta, pixels) = decode_split(&name, &bytes)?;
+    Ok(DecodedPhoto { meta, pixels })
+}
+
+/// A bracket being assembled by the page: photos are added one by one as files
+/// ([`Job::add_frame`]); each may be decoded before the run, here ([`Job::decode`]) or by a
+/// decoding worker ([`Job::set_decoded`]), so several decode at once; then [`Job::run`] runs the
+/// pipeline.
 #[wasm_bindgen]
 #[derive(Default)]
 pub struct Job {
-    frames: Vec<EncodedFrame>,
+    frames: Vec<Photo>,
 }
 
 #[wasm_bindgen]
@@ -130,7 +286,42 @@ impl Job {
 
     /// Adds one photo (JPEG, PNG or TIFF bytes); `name` is used in messages (the file name).
     pub fn add_frame(&mut self, name: String, bytes: Vec<u8>) {
-        self.frames.push(EncodedFrame { name, bytes });
+        self.frames
+            .push(Photo::Encoded(EncodedFrame { name, bytes }));
+    }
+
+    /// Decodes photo `index` (as added) here and now, so the run does not; a photo decoded
+    /// already is left as it is. Errors name the photo, as the run's would.
+    pub fn decode(&mut self, index: usize) -> Result<(), JsError> {
+        let slot = self.slot(index)?;
+        if let Photo::Encoded(e) = slot {
+            let d = skydome::bracket::decode(&e.name, &e.bytes, &DecodeOptions::default())
+                .map_err(|err| WebError::Pipeline(err.into()))?;
+            *slot = Photo::Decoded(d);
+        }
+        Ok(())
+    }
+
+    /// Replaces photo `index` (as added) by the same photo decoded by [`decode_photo`] in
+    /// another worker (its [`DecodedPhoto::meta_json`] and [`DecodedPhoto::take_pixels`]).
+    pub fn set_decoded(
+        &mut self,
+        index: usize,
+        meta_json: &str,
+        pixels: Vec<u8>,
+    ) -> Result<(), JsError> {
+        let d = join_decoded(meta_json, pixels)?;
+        *self.slot(index)? = Photo::Decoded(d);
+        Ok(())
+    }
+
+    fn slot(&mut self, index: usize) -> Result<&mut Photo, JsError> {
+        let n = self.frames.len();
+        self.frames.get_mut(index).ok_or_else(|| {
+            JsError::new(&format!(
+                "There is no photo {index} of {n} in this bracket."
+            ))
+        })
     }
 
     /// Number of photos added.
@@ -141,8 +332,10 @@ impl Job {
     /// Runs the pipeline with `options_json` ([`Options`] as JSON). `times` are exposure times
     /// in seconds in the order the photos were added (empty: from EXIF). `progress(stage,
     /// fraction)` is called between steps; returning `true` cancels.
+    /// The photos go to the run (decoded ones take 3 bytes a pixel), so a second run needs a
+    /// new job.
     pub fn run(
-        &self,
+        &mut self,
         options_json: &str,
         times: Vec<f64>,
         progress: &js_sys::Function,
@@ -159,7 +352,7 @@ impl Job {
                 .map(|v| v.is_truthy())
                 .unwrap_or(false)
         };
-        let dome = run_frames(self.frames.clone(), times, &options, &mut cb)?;
+        let dome = run_mixed(std::mem::take(&mut self.frames), times, &options, &mut cb)?;
         Ok(Outcome { dome })
     }
 }
@@ -456,7 +649,6 @@ pub fn list_times(list_name: &str, text: &str, names: Vec<String>) -> Result<Vec
 /// ran its big loops in the slow code (in Node's V8, 795 ms instead of 512 for 3 × 12 MP). The
 /// worker calls this once after loading, while the user frames the shot.
 pub fn warm_up(size: usize) -> Result<(), WebError> {
-    use skydome::bracket::Pixels;
     use skydome::synth::{generate, SynthOptions};
     let b = generate(&SynthOptions {
         width: size,

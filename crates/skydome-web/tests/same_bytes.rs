@@ -4,7 +4,10 @@
 
 use skydome::formats::{encode_radiance, PixelPoint, RadianceFormat};
 use skydome::pipeline::{self, EncodedFrame, Frames, Input, Options, SunMode};
-use skydome_web::{parse_options, run_frames, times_from_list, Outcome};
+use skydome_web::{
+    decode_split, join_decoded, parse_options, run_frames, run_mixed, times_from_list, Outcome,
+    Photo,
+};
 
 fn demo() -> (Vec<EncodedFrame>, Vec<f64>) {
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo");
@@ -152,4 +155,97 @@ fn overlay_on_request_is_the_runs_overlay() {
     let a = made.picture_jpeg(true).expect("overlay");
     assert_eq!(a, later.picture_jpeg(true).expect("overlay on request"));
     assert_ne!(a, later.picture_jpeg(false).expect("preview"));
+}
+
+/// Photos decoded in other workers (split into metadata and bytes, put back together), alone or
+/// mixed with photos decoded in the run, give the bytes the pipeline writes from the files; EXIF
+/// survives the trip (the times come from it in the second set); a broken photo fails with the
+/// message the run gives; parts that do not belong together are refused.
+#[test]
+fn photos_decoded_in_other_workers_give_the_same_bytes() {
+    let shared = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/frobisher_001"
+    );
+    let (demo_frames, demo_times) = demo();
+    let fisheye = r#"{"lens": {"detect": {"model": "stereographic", "fov_deg": 235, "circle": null}},
+            "sky": {"crop": true, "north_deg": 37, "sun": "auto"}, "products": {"preview": true}}"#;
+    let mut sets = vec![(demo_frames, Some(demo_times), fisheye)];
+    match std::fs::read_dir(shared) {
+        Ok(dir) => {
+            let mut v: Vec<EncodedFrame> = dir
+                .filter_map(Result::ok)
+                .map(|e| e.path())
+                .filter(|p| p.extension().is_some_and(|x| x == "jpg"))
+                .map(|p| EncodedFrame {
+                    name: p
+                        .file_name()
+                        .map(|n| n.to_string_lossy().into_owned())
+                        .unwrap_or_default(),
+                    bytes: std::fs::read(&p).expect("frobisher frame"),
+                })
+                .collect();
+            v.sort_by(|a, b| a.name.cmp(&b.name));
+            assert_eq!(v.len(), 3);
+            sets.push((v, None, "{}"));
+        }
+        Err(_) if std::env::var_os("SKYDOME_REQUIRE_SHARED_DATA").is_some() => {
+            panic!("{shared} is missing")
+        }
+        Err(_) => eprintln!("skipping the EXIF set: {shared} is missing"),
+    }
+    for (frames, times, json) in sets {
+        let o = parse_options(json).expect("options");
+        let want = Outcome::from_dome(
+            run_frames(frames.clone(), times.clone(), &o, &mut |_, _| false).expect("files"),
+        )
+        .hdr_bytes()
+        .expect("hdr");
+        // Every photo decoded elsewhere, then only the middle one.
+        for elsewhere in [vec![true; frames.len()], vec![false, true, false]] {
+            let photos = frames
+                .iter()
+                .zip(&elsewhere)
+                .map(|(f, &e)| match e {
+                    true => {
+                        let (meta, pixels) = decode_split(&f.name, &f.bytes).expect("decode");
+                        Photo::Decoded(join_decoded(&meta, pixels).expect("join"))
+                    }
+                    false => Photo::Encoded(f.clone()),
+                })
+                .collect();
+            let got = run_mixed(photos, times.clone(), &o, &mut |_, _| false).expect("mixed run");
+            let got = Outcome::from_dome(got).hdr_bytes().expect("hdr");
+            assert!(
+                got == want,
+                "{json}: decoded elsewhere {elsewhere:?} changed the bytes"
+            );
+        }
+    }
+
+    let (frames, _) = demo();
+    let mut broken = frames[1].bytes.clone();
+    broken.truncate(broken.len() / 3);
+    let cut = EncodedFrame {
+        name: "cut.jpg".into(),
+        bytes: broken.clone(),
+    };
+    let in_run = run_frames(
+        vec![frames[0].clone(), cut],
+        None,
+        &Options::default(),
+        &mut |_, _| false,
+    )
+    .expect_err("cut photo");
+    let elsewhere = decode_split("cut.jpg", &broken).expect_err("cut photo");
+    assert_eq!(elsewhere.to_string(), in_run.to_string());
+    assert!(
+        elsewhere.to_string().starts_with("cut.jpg: "),
+        "{elsewhere}"
+    );
+
+    let (meta, mut pixels) = decode_split(&frames[0].name, &frames[0].bytes).expect("decode");
+    pixels.pop();
+    let e = join_decoded(&meta, pixels).expect_err("short pixels");
+    assert!(e.to_string().contains("do not make a"), "{e}");
 }

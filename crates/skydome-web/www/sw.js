@@ -4,7 +4,7 @@
 // leave the phone.
 const CACHE = 'skydome-@BUILD@';
 const FILES = [
-  './', 'index.html', 'app.css', 'app.js', 'camera.js', 'compass.js', 'profiles.js', 'worker.js',
+  './', 'index.html', 'app.css', 'app.js', 'camera.js', 'compass.js', 'profiles.js', 'worker.js', 'decoder.js',
   'manifest.webmanifest', 'icons/icon.svg', 'icons/icon-192.png', 'icons/icon-512.png',
   'pkg/skydome_web.js', 'pkg/skydome_web_bg.wasm',
 ];

@@ -14,11 +14,80 @@ const ready = init();
 // skipped when a merge came first.
 let merged = false;
 ready.then(() => setTimeout(() => {
+  startHelpers();
   if (merged) return;
-  try { warm_up(256); warm_up(256); } catch (err) { console.warn(`warm-up: ${sentence(err)}`); }
+  try { warm_up(256); } catch (err) { console.warn(`warm-up: ${sentence(err)}`); }
 }, 0));
-let job = null;      // the photos of the current bracket (kept for a second run, e.g. a tapped sun)
+let photos = null;   // the photos of the current bracket as files (kept for a second run, e.g. a tapped sun)
+let job = null;      // the bracket handed to the core
 let outcome = null;  // the last run's products, encoded on demand
+
+// Decoding workers (decoder.js), one per core beyond this one's, at most three: each decodes
+// its share of a bracket's photos while this worker decodes the rest. They start (and warm up)
+// while the app is idle and are replaced by fresh ones after each merge, so the memory a
+// decoder's WebAssembly grew to while decoding goes back at once. Without nested workers (old
+// browsers) this worker decodes every photo itself; the bytes written are the same either way.
+const HELPERS = typeof Worker === 'undefined' ? 0 : Math.min(3, Math.max(0, (navigator.hardwareConcurrency || 1) - 1));
+let helpers = [];
+function startHelpers() {
+  helpers = [];
+  for (let k = 0; k < HELPERS; k++) {
+    try {
+      helpers.push(new Worker(new URL('./decoder.js', import.meta.url), { type: 'module' }));
+    } catch (err) {
+      break;
+    }
+  }
+}
+function retireHelpers() {
+  for (const h of helpers) h.terminate();
+  setTimeout(startHelpers, 0);
+  helpers = [];
+}
+
+// Decodes `frames` into a new job: photo i goes to helper i mod (helpers + 1) when that is a
+// helper, else this worker decodes it while the helpers work. The first photo's error wins, as
+// when the core decodes them in turn.
+async function decodeInto(id, frames) {
+  const j = new Job();
+  for (const f of frames) j.add_frame(f.name, new Uint8Array(f.bytes));
+  const shares = helpers.length + 1;
+  const errors = new Array(frames.length).fill(null);
+  let done = 0;
+  const report = () => {
+    done++;
+    postMessage({ id, progress: { stage: 'decoding', fraction: (0.9 * done) / frames.length } });
+  };
+  const waits = [];
+  frames.forEach((f, i) => {
+    const h = helpers[(i % shares) - 1];
+    if (!h) return;
+    waits.push(new Promise((resolve) => {
+      const onMessage = (e) => {
+        if (e.data.i !== i) return;
+        h.removeEventListener('message', onMessage);
+        resolve(e.data);
+      };
+      h.addEventListener('message', onMessage);
+      h.onerror = (e) => resolve({ i, error: `the photo decoder stopped: ${e.message || 'unknown error'}` });
+      const bytes = f.bytes.slice(0); // a copy: the photos stay here for a second run
+      h.postMessage({ i, name: f.name, bytes }, [bytes]);
+    }));
+  });
+  frames.forEach((f, i) => {
+    if (helpers[(i % shares) - 1]) return;
+    try { j.decode(i); } catch (err) { errors[i] = err; }
+    report();
+  });
+  for (const r of await Promise.all(waits)) {
+    if (r.error) errors[r.i] = new Error(r.error);
+    else j.set_decoded(r.i, r.meta, new Uint8Array(r.pixels));
+    report();
+  }
+  const failed = errors.find((e) => e);
+  if (failed) { j.free(); throw failed; }
+  return j;
+}
 
 function sentence(err) {
   const msg = String(err && err.message ? err.message : err).split(/\s+/).join(' ').trim();
@@ -61,6 +130,22 @@ function runJob(id, optionsJson, times) {
   };
 }
 
+async function decodeAndRun(id, options, times) {
+  if (job) { job.free(); job = null; }
+  merged = true;
+  const t0 = performance.now();
+  try {
+    job = await decodeInto(id, photos);
+  } finally {
+    retireHelpers();
+  }
+  const decodeMs = performance.now() - t0;
+  const result = runJob(id, options, times);
+  result.stages.decoding = (result.stages.decoding || 0) + decodeMs;
+  result.ms += decodeMs;
+  return result;
+}
+
 const products = {
   hdr: () => outcome.hdr(),
   exr: () => outcome.exr(),
@@ -72,14 +157,12 @@ const products = {
 const handlers = {
   async version() { return version(); },
   async run({ frames, options, times }) {
-    if (job) job.free();
-    job = new Job();
-    for (const f of frames) job.add_frame(f.name, new Uint8Array(f.bytes));
-    return runJob(this.id, options, times);
+    photos = frames;
+    return decodeAndRun(this.id, options, times);
   },
   async rerun({ options, times }) {
-    if (!job) throw new Error('there is no bracket to merge again; pick or capture the photos');
-    return runJob(this.id, options, times);
+    if (!photos) throw new Error('there is no bracket to merge again; pick or capture the photos');
+    return decodeAndRun(this.id, options, times);
   },
   async product({ name }) {
     if (!outcome) throw new Error('nothing has been merged yet');
