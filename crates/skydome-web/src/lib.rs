@@ -120,7 +120,7 @@ pub fn run_mixed(
             return Err(WebError::Pipeline(PipelineError::Cancelled));
         }
         decoded.push(match f {
-            Photo::Decoded(d) => d,
+            Photo::Decoded(d) => *d,
             Photo::Encoded(e) => {
                 skydome::bracket::decode(&e.name, &e.bytes, &DecodeOptions::default())
                     .map_err(|err| WebError::Pipeline(err.into()))?
@@ -154,7 +154,7 @@ pub enum Photo {
     /// The file's bytes (JPEG, PNG or TIFF), decoded in the run.
     Encoded(EncodedFrame),
     /// Decoded already ([`join_decoded`]).
-    Decoded(DecodedFrame),
+    Decoded(Box<DecodedFrame>),
 }
 
 /// Everything of a decoded photo but its pixels, as it crosses from the Web Worker that decoded
@@ -297,7 +297,7 @@ impl Job {
         if let Photo::Encoded(e) = slot {
             let d = skydome::bracket::decode(&e.name, &e.bytes, &DecodeOptions::default())
                 .map_err(|err| WebError::Pipeline(err.into()))?;
-            *slot = Photo::Decoded(d);
+            *slot = Photo::Decoded(Box::new(d));
         }
         Ok(())
     }
@@ -311,7 +311,7 @@ impl Job {
         pixels: Vec<u8>,
     ) -> Result<(), JsError> {
         let d = join_decoded(meta_json, pixels)?;
-        *self.slot(index)? = Photo::Decoded(d);
+        *self.slot(index)? = Photo::Decoded(Box::new(d));
         Ok(())
     }
 

@@ -209,7 +209,7 @@ fn photos_decoded_in_other_workers_give_the_same_bytes() {
                 .map(|(f, &e)| match e {
                     true => {
                         let (meta, pixels) = decode_split(&f.name, &f.bytes).expect("decode");
-                        Photo::Decoded(join_decoded(&meta, pixels).expect("join"))
+                        Photo::Decoded(Box::new(join_decoded(&meta, pixels).expect("join")))
                     }
                     false => Photo::Encoded(f.clone()),
                 })
