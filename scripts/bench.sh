@@ -10,7 +10,8 @@
 # (3) OpenCV's equivalent pipeline in Python (scripts/bench_helper.py opencv),
 # run alternately, each a whole process timed by /usr/bin/time (wall clock and peak resident
 # memory). Prints medians, skydome/floor and OpenCV/skydome, and each one's peak memory; then
-# `skydome merge` (no preview) at 3, 5 and 9 frames × 6, 12, 24 and 50 MP.
+# the whole fish-eye dome (lens, crop, sun, preview) on 3 × 12 MP; then `skydome merge` (no
+# preview) at 3, 5 and 9 frames × 6, 12, 24 and 50 MP.
 #
 # Needs python3 with venv, and /usr/bin/time (Debian: apt-get install time). The Python packages
 # (numpy, opencv-python-headless, Pillow) go into a virtual environment, $SKYDOME_BENCH_VENV or
@@ -103,6 +104,29 @@ for name, v in [("skydome merge --preview (calibrating)", s),
 print(f"runs: {s[3]} each, alternating; CPU = user + system time of the process (all threads)")
 print(f"skydome / decode floor = {s[0] / f[0]:.2f} wall, {s[2] / f[2]:.2f} CPU   (target ≤ 1.5)")
 print(f"OpenCV / skydome       = {o[0] / s[0]:.1f} wall, {o[2] / s[2]:.1f} CPU    (target ≥ 10)")
+EOF
+
+# --- The whole fish-eye dome (what the phone app does) on 3 × 3464² (12 MP) ---------------------
+# Lens circle, calibration, merge, crop to the 180° dome, sun detection and disc, preview.
+F="$WORK/fisheye_3464_3"
+synth 3464 "-2,0,2" "$F"
+rm -f "$WORK/fisheye.txt"
+echo "3 × 3464² fish-eye frames, $RUNS runs of the whole dome…" >&2
+for i in $(seq "$RUNS"); do
+  # shellcheck disable=SC2046
+  timed fisheye "$SKYDOME" merge $(frames_of "$F") --times "$(times_of "$F")" --fisheye \
+    --lens-model stereographic --fov 235 --crop --north 0 --sun auto \
+    -o "$WORK/f.hdr" --preview "$WORK/f.jpg" --force --quiet
+done
+"$PY" - "$WORK" <<'EOF'
+import statistics, sys, os
+rows = [l.split() for l in open(os.path.join(sys.argv[1], "fisheye.txt")) if l.strip()]
+wall = statistics.median(float(r[0]) for r in rows)
+cpu = statistics.median(float(r[2]) + float(r[3]) for r in rows)
+peak = max(int(r[1]) for r in rows) / 1024
+print()
+print(f"{'3 × 3464² (12 MP) fish-eye dome':46} {'median wall':>12} {'median CPU':>11} {'peak memory':>12}")
+print(f"{'skydome merge --fisheye --crop --sun auto --preview':46} {wall:10.3f} s {cpu:9.3f} s {peak:9.0f} MB")
 EOF
 
 # --- Scaling: frames × megapixels ---------------------------------------------------------------
