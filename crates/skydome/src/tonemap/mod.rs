@@ -355,8 +355,8 @@ fn srgb_lut() -> &'static [f32; LUT_SIZE + 1] {
 #[inline(always)]
 fn srgb255(x: f32) -> f32 {
     const KNEE: f32 = 0.003_130_8;
-    use crate::fastmath::{clamp, exp2, log2, max};
-    let x = clamp(x, 0.0, 1.0);
+    use crate::fastmath::{exp2, log2, max};
+    let x = x.clamp(0.0, 1.0);
     let linear = (255.0 * 12.92) * x;
     let pow = exp2(log2(max(x, KNEE)) * (1.0 / 2.4));
     let encoded = (255.0 * 1.055) * pow - 255.0 * 0.055;
@@ -795,9 +795,7 @@ fn map_row_u8(
         for c in 0..3 {
             for i in 0..BLOCK {
                 // Black (zero luminance) stays black: its code is 0 + offset < 1.
-                // Through i32 (exact: the value is in 0..=255), which converts four lanes at a
-                // time on wasm as on x86; a direct `as u8` is converted lane by lane on wasm.
-                codes[c][i] = crate::fastmath::clamp(q[c][i] + off[c][i], 0.0, 255.0) as i32 as u8;
+                codes[c][i] = (q[c][i] + off[c][i]).clamp(0.0, 255.0) as u8;
             }
         }
         for (i, px) in o.chunks_exact_mut(3).enumerate() {
