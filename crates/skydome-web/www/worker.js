@@ -39,10 +39,13 @@ function startHelpers() {
     }
   }
 }
+// Called after a merge: ending a worker frees its memory on other threads of the browser, which
+// slowed a merge that ran meanwhile (measured), and fresh ones warm up a few seconds later, while
+// the user looks at the result.
 function retireHelpers() {
   for (const h of helpers) h.terminate();
-  setTimeout(startHelpers, 0);
   helpers = [];
+  setTimeout(startHelpers, 3000);
 }
 
 // Decodes `frames` into a new job: photo i goes to helper i mod (helpers + 1) when that is a
@@ -136,14 +139,14 @@ async function decodeAndRun(id, options, times) {
   const t0 = performance.now();
   try {
     job = await decodeInto(id, photos);
+    const decodeMs = performance.now() - t0;
+    const result = runJob(id, options, times);
+    result.stages.decoding = (result.stages.decoding || 0) + decodeMs;
+    result.ms += decodeMs;
+    return result;
   } finally {
     retireHelpers();
   }
-  const decodeMs = performance.now() - t0;
-  const result = runJob(id, options, times);
-  result.stages.decoding = (result.stages.decoding || 0) + decodeMs;
-  result.ms += decodeMs;
-  return result;
 }
 
 const products = {
