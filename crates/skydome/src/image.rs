@@ -113,6 +113,36 @@ impl Circle {
         let dy = y as f64 + 0.5 - self.cy;
         dx * dx + dy * dy <= self.r * self.r
     }
+
+    /// The pixels of row `y` whose centres are inside the circle, as the span `x0..x1` of an
+    /// image `width` pixels wide (empty when none are): the pixels for which
+    /// [`Circle::contains_pixel`] holds, without testing each (the circle is convex).
+    pub fn row_span(&self, y: usize, width: usize) -> (usize, usize) {
+        let dy = y as f64 + 0.5 - self.cy;
+        let h2 = self.r * self.r - dy * dy;
+        if h2.is_nan() || h2 < 0.0 {
+            return (0, 0);
+        }
+        let h = h2.sqrt();
+        // Centres x + 0.5 within [cx − h, cx + h], then the exact test at both ends (the square
+        // root can round either way).
+        let x0 = (self.cx - h - 0.5).ceil().clamp(0.0, width as f64) as usize;
+        let x1 = ((self.cx + h - 0.5).floor() + 1.0).clamp(0.0, width as f64) as usize;
+        let (mut x0, mut x1) = (x0, x1.max(x0));
+        while x0 > 0 && self.contains_pixel(x0 - 1, y) {
+            x0 -= 1;
+        }
+        while x0 < x1 && !self.contains_pixel(x0, y) {
+            x0 += 1;
+        }
+        while x1 < width && self.contains_pixel(x1, y) {
+            x1 += 1;
+        }
+        while x1 > x0 && !self.contains_pixel(x1 - 1, y) {
+            x1 -= 1;
+        }
+        (x0, x1)
+    }
 }
 
 /// A pixel position (origin top-left, `x` right, `y` down, pixel centres at `+0.5`), in
@@ -205,5 +235,72 @@ pub fn check_samples(
             expected,
             got: len,
         }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn row_span_is_the_run_of_pixels_contains_pixel_accepts() {
+        // Centres on and off pixel corners and centres, radii from under a pixel up, circles
+        // cut by every edge and lying outside the image.
+        let circles = [
+            Circle {
+                cx: 20.0,
+                cy: 15.0,
+                r: 10.0,
+            },
+            Circle {
+                cx: 20.5,
+                cy: 15.5,
+                r: 7.5,
+            },
+            Circle {
+                cx: 0.3,
+                cy: 29.9,
+                r: 12.25,
+            },
+            Circle {
+                cx: 39.7,
+                cy: -2.0,
+                r: 6.0,
+            },
+            Circle {
+                cx: 10.5,
+                cy: 10.5,
+                r: 0.5,
+            },
+            Circle {
+                cx: 10.5,
+                cy: 10.5,
+                r: 0.49,
+            },
+            Circle {
+                cx: 60.0,
+                cy: 15.0,
+                r: 5.0,
+            },
+            Circle {
+                cx: 20.0,
+                cy: 15.0,
+                r: 1000.0,
+            },
+        ];
+        let (w, h) = (40usize, 30usize);
+        for c in &circles {
+            for y in 0..h + 3 {
+                let (x0, x1) = c.row_span(y, w);
+                assert!(x0 <= x1 && x1 <= w, "{c:?} row {y}: {x0}..{x1}");
+                for x in 0..w {
+                    assert_eq!(
+                        (x0..x1).contains(&x),
+                        c.contains_pixel(x, y),
+                        "{c:?} ({x},{y})"
+                    );
+                }
+            }
+        }
     }
 }

@@ -45,7 +45,7 @@
 //! the ≈ 57 ms a 6 MP merge takes on a 2-core machine; see `benches/calibrate_merge.rs`).
 
 use crate::bracket::{Frame, Pixels};
-use crate::image::HdrImage;
+use crate::image::{Circle, HdrImage};
 use crate::noise::{self, NoiseEstimate, NoiseModel};
 pub use crate::response::Weighting;
 use crate::response::{Response, LEVELS};
@@ -188,21 +188,25 @@ impl Merged {
         }
     }
 
-    /// Things the user should know about this merge, one plain sentence each. `area` (row-major,
-    /// one entry per pixel), when given, is the part of the image that matters — a fish-eye's
-    /// image circle, whose black housing is otherwise counted as black pixels; it needs the
+    /// Things the user should know about this merge, one plain sentence each. `area`, when
+    /// given, is the part of the image that matters — a fish-eye's image circle (pixel centres
+    /// inside it), whose black housing is otherwise counted as black pixels; it needs the
     /// clipped mask ([`MergeOptions::clipped_mask`]) to take effect.
-    pub fn warnings(&self, area: Option<&[bool]>) -> Vec<String> {
+    pub fn warnings(&self, area: Option<&Circle>) -> Vec<String> {
         let mut w = Vec::new();
         let np = self.radiance.width * self.radiance.height;
         let (black, total) = match (area, &self.clipped) {
-            (Some(a), Some(m)) if a.len() == m.len() => (
-                m.iter()
-                    .zip(a)
-                    .filter(|(&f, &inside)| inside && f & BLACK != 0)
-                    .count(),
-                a.iter().filter(|&&v| v).count(),
-            ),
+            (Some(c), Some(m)) if m.len() == np => {
+                // Row by row over the circle's span of each row: no per-pixel mask.
+                let width = self.radiance.width;
+                let (mut black, mut total) = (0usize, 0usize);
+                for (y, row) in m.chunks_exact(width.max(1)).enumerate() {
+                    let (x0, x1) = c.row_span(y, width);
+                    total += x1 - x0;
+                    black += row[x0..x1].iter().filter(|&&f| f & BLACK != 0).count();
+                }
+                (black, total)
+            }
             _ => (self.black_pixels, np),
         };
         if total > 0 && black as f64 > BLACK_WARN_FRACTION * total as f64 {

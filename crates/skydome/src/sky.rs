@@ -871,30 +871,9 @@ fn region_box_mean(
     // Each row's inside pixels form one span `lo..hi` (box coordinates): the circle is convex.
     let spans: Vec<(usize, usize)> = (0..bh)
         .map(|y| {
-            let inside = |x: usize| region.contains_pixel(x0 + x, y0 + y);
-            let dy = (y0 + y) as f64 + 0.5 - region.cy;
-            let h2 = region.r * region.r - dy * dy;
-            if h2 < 0.0 {
-                return (0, 0);
-            }
-            let h = h2.sqrt();
-            // The estimate from the circle, then corrected by the exact test at both ends.
-            let est = |v: f64| (v - x0 as f64 - 0.5).round().clamp(0.0, bw as f64) as usize;
-            let (mut lo, mut hi) = (est(region.cx - h), est(region.cx + h) + 1);
-            hi = hi.min(bw);
-            while lo > 0 && inside(lo - 1) {
-                lo -= 1;
-            }
-            while lo < bw && !inside(lo) {
-                lo += 1;
-            }
-            while hi < bw && inside(hi) {
-                hi += 1;
-            }
-            while hi > lo && !inside(hi - 1) {
-                hi -= 1;
-            }
-            (lo, hi)
+            let (a, e) = region.row_span(y0 + y, x0 + bw);
+            let (lo, hi) = (a.max(x0) - x0, e.max(x0) - x0);
+            (lo, hi.max(lo))
         })
         .collect();
     let raw = |v: f32| if v.is_finite() { v.max(0.0) } else { 0.0 };

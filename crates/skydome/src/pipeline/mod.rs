@@ -529,16 +529,7 @@ pub fn run(
     p.at(Stage::Merging, 1.0)?;
     // Black pixels and disagreement are judged inside the lens circle when there is one (the
     // housing outside is black in every frame by design).
-    let area: Option<Vec<bool>> = lens.as_ref().map(|(l, _)| {
-        // Row by row: no division per pixel.
-        let (w, h) = (br.width(), br.height());
-        let mut a = Vec::with_capacity(w * h);
-        for y in 0..h {
-            a.extend((0..w).map(|x| l.circle.contains_pixel(x, y)));
-        }
-        a
-    });
-    warnings.extend(merged.warnings(area.as_deref()));
+    warnings.extend(merged.warnings(lens.as_ref().map(|(l, _)| &l.circle)));
     let inconsistent_fraction = merged
         .inconsistent
         .is_some()

@@ -457,26 +457,11 @@ pub(crate) fn check_image<T>(img: &RgbImage<T>) -> Result<(), TonemapError> {
     Ok(())
 }
 
-/// Row mask: the `[x0, x1)` span of row `y` inside the circle (the whole row without a mask).
+/// Row mask: the `[x0, x1)` span of row `y` inside the circle (the whole row without a mask);
+/// see [`Circle::row_span`].
 #[inline]
 pub(crate) fn row_span(mask: Option<&Circle>, width: usize, y: usize) -> (usize, usize) {
-    match mask {
-        None => (0, width),
-        Some(c) => {
-            let dy = y as f64 + 0.5 - c.cy;
-            let h2 = c.r * c.r - dy * dy;
-            if h2 < 0.0 {
-                return (0, 0);
-            }
-            let h = h2.sqrt();
-            // Pixel centres x + 0.5 within [cx - h, cx + h].
-            let x0 = (c.cx - h - 0.5).ceil().max(0.0);
-            let x1 = (c.cx + h - 0.5).floor() + 1.0;
-            let x0 = (x0 as usize).min(width);
-            let x1 = (x1.max(0.0) as usize).min(width);
-            (x0, x1.max(x0))
-        }
-    }
+    mask.map_or((0, width), |c| c.row_span(y, width))
 }
 
 #[cfg(test)]
