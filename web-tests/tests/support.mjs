@@ -34,13 +34,13 @@ export function tempDir(name) {
   return mkdtempSync(path.join(tmpdir(), `skydome-web-${name}-`));
 }
 
-/** Starts `skydome serve` on a free port; resolves to {origin, stop}. */
-export async function serve() {
-  if (!existsSync(path.join(appDir, 'index.html'))) {
-    throw new Error(`${appDir}: the app is not built; run crates/skydome-web/build.sh`);
+/** Starts `skydome serve` of `dir` (the built app) on a free port; resolves to {origin, stop}. */
+export async function serve(dir = appDir) {
+  if (!existsSync(path.join(dir, 'index.html'))) {
+    throw new Error(`${dir}: the app is not built; run crates/skydome-web/build.sh`);
   }
   const port = 18000 + Math.floor(Math.random() * 2000);
-  const proc = spawn(skydomeBin(), ['serve', '--addr', `127.0.0.1:${port}`, '--dir', appDir], {
+  const proc = spawn(skydomeBin(), ['serve', '--addr', `127.0.0.1:${port}`, '--dir', dir], {
     stdio: ['ignore', 'pipe', 'pipe'],
   });
   await new Promise((resolve, reject) => {

@@ -17,7 +17,7 @@ ready.then(() => setTimeout(() => {
   startHelpers();
   if (merged) return;
   try { warm_up(256); } catch (err) { console.warn(`warm-up: ${sentence(err)}`); }
-}, 0));
+}, 0)).catch(() => {}); // a core that fails to load is reported by the first request
 let photos = null;   // the photos of the current bracket as files (kept for a second run, e.g. a tapped sun)
 let job = null;      // the bracket handed to the core
 let outcome = null;  // the last run's products, encoded on demand
@@ -32,11 +32,21 @@ let helpers = [];
 function startHelpers() {
   helpers = [];
   for (let k = 0; k < HELPERS; k++) {
+    let h;
     try {
-      helpers.push(new Worker(new URL('./decoder.js', import.meta.url), { type: 'module' }));
+      h = new Worker(new URL('./decoder.js', import.meta.url), { type: 'module' });
     } catch (err) {
       break;
     }
+    // A helper that fails outside a merge leaves the pool; its error is handled here, so it
+    // does not reach the page as this worker's (which would restart this worker).
+    h.onerror = (e) => {
+      e.preventDefault();
+      console.warn(`a decoding worker stopped: ${e.message || 'unknown error'}`);
+      helpers = helpers.filter((x) => x !== h);
+      h.terminate();
+    };
+    helpers.push(h);
   }
 }
 // Called after a merge: ending a worker frees its memory on other threads of the browser, which
@@ -61,21 +71,33 @@ async function decodeInto(id, frames) {
     done++;
     postMessage({ id, progress: { stage: 'decoding', fraction: (0.9 * done) / frames.length } });
   };
+  // Each helper answers its photos by index; if it dies (or never loads), this worker decodes
+  // the photos it still owed.
+  const pending = new Map(); // photo index -> resolve
   const waits = [];
+  helpers.forEach((h, k) => {
+    h.onmessage = (e) => {
+      const resolve = pending.get(e.data.i);
+      pending.delete(e.data.i);
+      if (resolve) resolve(e.data);
+    };
+    h.onerror = (e) => {
+      e.preventDefault();
+      console.warn(`a decoding worker stopped: ${e.message || 'unknown error'}`);
+      for (const [i, resolve] of pending) {
+        if (i % shares === k + 1) {
+          pending.delete(i);
+          resolve({ i, lost: true });
+        }
+      }
+    };
+  });
   frames.forEach((f, i) => {
     const h = helpers[(i % shares) - 1];
     if (!h) return;
-    waits.push(new Promise((resolve) => {
-      const onMessage = (e) => {
-        if (e.data.i !== i) return;
-        h.removeEventListener('message', onMessage);
-        resolve(e.data);
-      };
-      h.addEventListener('message', onMessage);
-      h.onerror = (e) => resolve({ i, error: `the photo decoder stopped: ${e.message || 'unknown error'}` });
-      const bytes = f.bytes.slice(0); // a copy: the photos stay here for a second run
-      h.postMessage({ i, name: f.name, bytes }, [bytes]);
-    }));
+    waits.push(new Promise((resolve) => pending.set(i, resolve)));
+    const bytes = f.bytes.slice(0); // a copy: the photos stay here for a second run
+    h.postMessage({ i, name: f.name, bytes }, [bytes]);
   });
   frames.forEach((f, i) => {
     if (helpers[(i % shares) - 1]) return;
@@ -83,8 +105,11 @@ async function decodeInto(id, frames) {
     report();
   });
   for (const r of await Promise.all(waits)) {
-    if (r.error) errors[r.i] = new Error(r.error);
-    else j.set_decoded(r.i, r.meta, new Uint8Array(r.pixels));
+    try {
+      if (r.error) throw new Error(r.error);
+      if (r.lost) j.decode(r.i);
+      else j.set_decoded(r.i, r.meta, new Uint8Array(r.pixels));
+    } catch (err) { errors[r.i] = err; }
     report();
   }
   const failed = errors.find((e) => e);
