@@ -127,7 +127,6 @@ function sentence(err) {
 }
 
 function runJob(id, optionsJson, times) {
-  merged = true;
   if (outcome) { outcome.free(); outcome = null; }
   const t0 = performance.now();
   // Milliseconds spent in each stage (from its first progress event to the next stage's), for
