@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests (each test crate uses a subset of them).
 #![allow(dead_code)]
 
+pub mod encode;
+
 use std::path::{Path, PathBuf};
 
 use skydome::bracket::{Exposure, Frame, Pixels};
