@@ -1,15 +1,15 @@
-//! The noise-model refinement: the second pass of [`Weighting::Noise`], which re-weights
-//! every vote by the noise of the code its frame was expected to read.
+//! The noise-model refinement: the second pass of [`Weighting::Noise`](super::Weighting::Noise),
+//! which re-weights every vote by the noise of the code its frame was expected to read.
 
 use super::consistency::LOWER_BOUND_CODE;
-use super::{code_tables, fast_exp2, fast_log2, Code, Weighting, ROWS_PER_BAND};
+use super::{code_tables, fast_exp2, fast_log2, Code, ROWS_PER_BAND};
 use crate::noise::{self, NoiseModel};
 use crate::response::{Response, LEVELS};
 
 /// Bins per stop of the expected-code weight tables of [`Refine`].
 const EXPECTED_BINS_PER_STOP: f32 = 32.0;
 
-/// The second pass of the noise-aware merge ([`Weighting::Noise`]).
+/// The second pass of the noise-aware merge ([`Weighting::Noise`](super::Weighting::Noise)).
 ///
 /// A vote's variance is that of the code the frame *should* read for the pixel's light, not of
 /// the code it happened to read: weighting by the observed code lets each frame's own noise
