@@ -632,7 +632,6 @@ use crate::fastmath::log2 as fast_log2;
 
 #[cfg(test)]
 mod tests {
-    use super::hat::hat_f;
     use super::*;
 
     /// The merge's definition, evaluated per sample in f64 with no tables.
