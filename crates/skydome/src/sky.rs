@@ -55,8 +55,10 @@ use serde::{Deserialize, Serialize};
 use time::OffsetDateTime;
 
 use crate::fisheye::{LensProfile, Projection};
-use crate::formats::PixelPoint;
+use crate::image::PixelPoint;
+// Radiance's luminance formula lives beside the pixels; re-exported where the sky's users look.
 use crate::image::{luminance, Circle, HdrImage, RgbImage};
+pub use crate::image::{radiance_luminance, RADIANCE_EFFICACY};
 
 /// Errors from sky geometry, sun detection and ephemeris.
 #[derive(Debug, thiserror::Error)]
@@ -619,17 +621,6 @@ impl SkyGeometry {
                 }
             })
     }
-}
-
-/// Radiance's luminous efficacy of its RGB "watts", lm/W: its tools (`pvalue -o`, `evalglare`,
-/// `falsecolor`) take luminance = 179 × (0.265 R + 0.670 G + 0.065 B).
-pub const RADIANCE_EFFICACY: f64 = 179.0;
-
-/// Luminance (or illuminance, from irradiance) of a linear RGB radiance the way Radiance's tools
-/// compute it: `179 × (0.265 R + 0.670 G + 0.065 B)`; cd/m² (or lux) when the radiance is in
-/// Radiance's W·sr⁻¹·m⁻², in relative units otherwise.
-pub fn radiance_luminance(rgb: [f64; 3]) -> f64 {
-    RADIANCE_EFFICACY * (0.265 * rgb[0] + 0.670 * rgb[1] + 0.065 * rgb[2])
 }
 
 /// How the phone lay, when not level (see [`SkyGeometry::with_level`]).
