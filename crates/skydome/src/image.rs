@@ -144,12 +144,24 @@ impl Bilinear {
         }
     }
 
-    /// The interpolated value from the four neighbours' values (in [`Bilinear::idx`] order).
+    /// The interpolated value from the four neighbours' values (in [`Bilinear::idx`] order),
+    /// as `a + (b − a)·t` steps.
     #[inline]
     pub fn mix(&self, [v00, v01, v10, v11]: [f32; 4]) -> f32 {
         let top = v00 + (v01 - v00) * self.ax;
         let bot = v10 + (v11 - v10) * self.ax;
         top + (bot - top) * self.ay
+    }
+
+    /// The same value as [`Bilinear::mix`] written as the weighted sum `a·(1 − t) + b·t`,
+    /// which rounds differently in the last bit: the lens-circle detector's form, kept so that
+    /// detected circles (and every output that depends on them) stay bit for bit the same.
+    #[inline]
+    pub fn weighted_sum(&self, [v00, v01, v10, v11]: [f32; 4]) -> f32 {
+        let (ax, ay) = (self.ax, self.ay);
+        let top = v00 * (1.0 - ax) + v01 * ax;
+        let bot = v10 * (1.0 - ax) + v11 * ax;
+        top * (1.0 - ay) + bot * ay
     }
 }
 

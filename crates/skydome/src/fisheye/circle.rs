@@ -215,7 +215,7 @@ fn housing_threshold(img: &Blurred) -> (f32, f32) {
 #[inline]
 fn bilinear1(img: &Blurred, x: f64, y: f64) -> f32 {
     let b = Bilinear::at(img.w, img.h, x, y);
-    b.mix(b.idx.map(|i| Blurred::value(img.sums[i])))
+    b.weighted_sum(b.idx.map(|i| Blurred::value(img.sums[i])))
 }
 
 /// Edge points on rays walked inwards from the frame edge towards `centre`.
