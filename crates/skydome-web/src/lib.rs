@@ -18,6 +18,7 @@ use std::ops::ControlFlow;
 
 use serde::{Deserialize, Serialize};
 use skydome::bracket::{CaptureInfo, DecodeOptions, DecodedFrame, Pixels};
+use skydome::camera::CameraProfile;
 use skydome::fisheye::{LensKind, LensProfile};
 use skydome::formats::exr::ExrOptions;
 use skydome::formats::picture::{encode_rgb8, PictureFormat, DEFAULT_JPEG_QUALITY};
@@ -26,7 +27,6 @@ use skydome::image::Circle;
 use skydome::pipeline::{
     self, Dome, EncodedFrame, Frames, Input, Options, PipelineError, Progress,
 };
-use skydome::response::CameraProfile;
 use skydome::sky::{DevicePose, ImageOrientation, SkyGeometry};
 use wasm_bindgen::prelude::*;
 

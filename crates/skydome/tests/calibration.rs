@@ -5,9 +5,10 @@ use common::data_dir;
 use common::load_jpegs;
 
 use skydome::bracket::{Exposure, Frame, Pixels};
+use skydome::camera::CameraProfile;
 use skydome::response::{
     calibrate, calibrate_samples, sample_count_experiment, solve_dense_svd, solve_schur, stability,
-    CalibrateOptions, CameraProfile, Response, ResponseError, Solver, PROFILE_VERSION,
+    CalibrateOptions, Response, ResponseError, Solver, PROFILE_VERSION,
 };
 use skydome::sampling::{sample, SampleOptions};
 use skydome::synth::{generate, SynthOptions};
@@ -262,7 +263,7 @@ fn linear_sixteen_bit_merge_is_exact_with_linear_response() {
 fn profile_round_trips_through_json() {
     let b = small_bracket();
     let cal = calibrate(&b.frames, b.circle, &CalibrateOptions::default()).unwrap();
-    let mut p = cal.to_profile();
+    let mut p = CameraProfile::from_calibration(&cal);
     p.make = Some("Synth".into());
     p.model = Some("Fish-eye 235".into());
     p.iso = Some(100.0);

@@ -2,10 +2,10 @@
 //! merge, so a uniform sky comes out flat.
 
 use skydome::bracket::{CaptureInfo, DecodedFrame, Pixels};
+use skydome::camera::CameraProfile;
 use skydome::fisheye::{LensKind, LensProfile, Vignetting};
 use skydome::image::Circle;
 use skydome::pipeline::{self, Frames, Input, LensSource, Options, ResponseSource};
-use skydome::response::CameraProfile;
 
 const CIRCLE: Circle = Circle {
     cx: 160.0,

@@ -1,10 +1,11 @@
-//! The lens-profile JSON format: where the optical axis is, how rays map to radii, how well
-//! that was fitted.
+//! The lens profile: where the optical axis is, how rays map to radii, how well that was
+//! fitted, and the lens's fall-off (vignetting) with its fit and removal. Stored as JSON by
+//! [`LensProfile::to_json`] and read back by [`LensProfile::from_json`].
 
 use serde::{Deserialize, Serialize};
 
-use crate::fisheye::{check_fov, FisheyeError, LensFit, LensKind, ModelFit, Projection};
-use crate::image::Circle;
+use super::{check_fov, FisheyeError, LensFit, LensKind, ModelFit, Projection};
+use crate::image::{Circle, HdrImage};
 
 /// The lens-profile JSON version this build writes and reads.
 pub const LENS_PROFILE_VERSION: u32 = 1;
@@ -122,7 +123,7 @@ impl Vignetting {
 
 /// Divides the lens's fall-off out of `img` (pixels in the lens's frame: its circle's centre is
 /// the optical axis); pixels beyond the projection's reach are left as they are.
-pub fn devignette(img: &mut crate::image::HdrImage, lens: &LensProfile, v: &Vignetting) {
+pub fn devignette(img: &mut HdrImage, lens: &LensProfile, v: &Vignetting) {
     let (cx, cy) = (lens.circle.cx, lens.circle.cy);
     let limit = lens.projection.theta_limit();
     let w = img.width;

@@ -1,11 +1,18 @@
-//! The camera-profile JSON format: a camera's response curves (and noise model), made once per
-//! device by calibration and reused by every merge.
+//! The camera profile: what calibrating one camera found — its response curves
+//! ([`crate::response`]), its noise model ([`crate::noise`]) and the merge weighting it suggests
+//! ([`crate::merge`]) — made once per device and reused by every merge, stored as JSON by
+//! [`CameraProfile::to_json`] and read back (validated) by [`CameraProfile::from_json`].
+//!
+//! It sits above the response, noise and merge modules because it holds a piece of each (see
+//! the layer table in the crate documentation).
 
 use crate::merge::Weighting;
-use crate::response::{Response, ResponseError};
+use crate::noise::NoiseModel;
+use crate::response::{Calibration, Response, ResponseError};
 
-/// Current [`CameraProfile`] format version.
-pub const PROFILE_VERSION: u32 = 1;
+/// Current [`CameraProfile`] format version (defined beside [`ResponseError::Version`], which
+/// names it).
+pub use crate::response::PROFILE_VERSION;
 
 /// A camera response stored as JSON.
 ///
@@ -50,7 +57,7 @@ pub struct CameraProfile {
     /// Optional: profiles written before it existed load without it, and the merge then
     /// estimates it from the bracket.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub noise: Option<Box<crate::noise::NoiseModel>>,
+    pub noise: Option<Box<NoiseModel>>,
 }
 
 impl CameraProfile {
@@ -64,6 +71,25 @@ impl CameraProfile {
             weighting: Weighting::Hat,
             samples: 0,
             seed: 0,
+            make: None,
+            model: None,
+            iso: None,
+            date: None,
+            noise: None,
+        }
+    }
+
+    /// The profile of a calibration (camera fields empty: [`crate::pipeline::describe_camera`]
+    /// fills them from EXIF; no noise model: the merge estimates it).
+    pub fn from_calibration(cal: &Calibration) -> Self {
+        Self {
+            version: PROFILE_VERSION,
+            linear: false,
+            g: cal.response.curves().clone(),
+            lambda: cal.lambda,
+            weighting: Weighting::Hat,
+            samples: cal.report().used,
+            seed: cal.report().seed,
             make: None,
             model: None,
             iso: None,
