@@ -1,9 +1,7 @@
 //! Pixel ↔ sky-direction mapping, north, poses and EXIF orientation, the sun (detection,
 //! ephemeris, cross-check), on synthetic domes and the real Alpnach frames.
 
-mod fisheye_support;
-
-use fisheye_support::*;
+use crate::fisheye_support::*;
 use skydome::fisheye::{detect_circle, LensKind, LensProfile};
 use skydome::formats::PixelPoint;
 use skydome::image::Circle;

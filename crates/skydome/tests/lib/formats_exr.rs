@@ -1,8 +1,7 @@
 //! OpenEXR: round trips (half/float), metadata mapping, real files from other software compared
 //! with the `exr` crate's generic reader, and hostile input.
 
-mod common;
-use common::data_dir;
+use crate::common::data_dir;
 use std::path::{Path, PathBuf};
 
 use exr::prelude::{f16, ReadChannels, ReadLayers};

@@ -10,6 +10,7 @@
 //! reading, and the sky map close to the render; an overcast sky gets no disc. CI requires the
 //! tools (`SKYDOME_REQUIRE_INDEPENDENT_READERS=1`).
 
+use crate::common;
 use std::path::Path;
 use std::process::Command;
 
@@ -23,8 +24,6 @@ use skydome::reproject::{reproject, MapProjection, ReprojectOptions};
 use skydome::sky::{radiance_luminance, Direction};
 use skydome::sun_disc::{sun_solid_angle_sr, DirectSource};
 use skydome::synth::{self, SynthOptions};
-
-mod common;
 
 /// A Radiance sky: what gendaylit was told and what it wrote.
 struct Sky {

@@ -1,7 +1,7 @@
 //! Translation alignment (median threshold bitmaps) on synthetic shifts with known truth and on
 //! the real hand-held bracket in ../shared/data/banterle_alignment.
-mod common;
-use common::{data_dir, load_jpegs};
+use crate::common;
+use crate::common::{data_dir, load_jpegs};
 
 use skydome::align::{align, apply_shifts, AlignOptions, Alignment};
 use skydome::bracket::Frame;

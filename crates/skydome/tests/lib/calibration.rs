@@ -1,8 +1,7 @@
 //! Response calibration against ground truth, the dense SVD reference, OpenCV's measured
 //! figures and colour-hdri's reference curves.
-mod common;
-use common::data_dir;
-use common::load_jpegs;
+use crate::common::data_dir;
+use crate::common::load_jpegs;
 
 use skydome::bracket::{Exposure, Frame, Pixels};
 use skydome::camera::CameraProfile;

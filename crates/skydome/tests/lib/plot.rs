@@ -1,5 +1,6 @@
 //! Pictures: response curves (PNG/SVG), false colour, histogram, and one saved picture of each
-//! kind (plus the tone-mapped preview and the lit spheres) under `target/pictures/` to look at.
+//! kind (plus the tone-mapped preview and the lit spheres) under `target/pictures/` to look at,
+//! each compared with its reference picture in `tests/reference/` (`SKYDOME_BLESS=1` rewrites them).
 
 use std::path::PathBuf;
 
@@ -15,6 +16,65 @@ fn pictures_dir() -> PathBuf {
     let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/pictures");
     std::fs::create_dir_all(&d).unwrap();
     d
+}
+
+/// A pixel differs when one of its channels differs by more than this many 8-bit codes …
+const REFERENCE_CODES: i32 = 8;
+/// … and a picture matches its reference when at most this fraction of its pixels differ
+/// (room for another CPU's rounding in anti-aliased edges and glyphs, none for a moved curve,
+/// a lost label or a changed colour map).
+const REFERENCE_PIXELS: f64 = 0.01;
+
+/// Compares the PNG `png` with `tests/reference/<name>.png` within the tolerance above, or
+/// writes it there when `SKYDOME_BLESS=1` (then look at it before committing it). A picture
+/// that does not match is also written to `target/pictures/<name>.actual.png`.
+fn check_reference(name: &str, png: &[u8]) {
+    let reference = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/reference")
+        .join(format!("{name}.png"));
+    if std::env::var("SKYDOME_BLESS").as_deref() == Ok("1") {
+        std::fs::create_dir_all(reference.parent().unwrap()).unwrap();
+        let tmp = reference.with_extension("png.tmp");
+        std::fs::write(&tmp, png).unwrap();
+        std::fs::rename(&tmp, &reference).unwrap();
+        return;
+    }
+    let got = image::load_from_memory(png).unwrap().into_rgb8();
+    let want = image::open(&reference)
+        .unwrap_or_else(|e| {
+            panic!(
+                "{}: {e} (SKYDOME_BLESS=1 cargo test -p skydome --test lib plot:: writes it)",
+                reference.display()
+            )
+        })
+        .into_rgb8();
+    let actual = pictures_dir().join(format!("{name}.actual.png"));
+    if got.dimensions() != want.dimensions() {
+        std::fs::write(&actual, png).unwrap();
+        panic!(
+            "{name}: {:?} pixels, the reference has {:?} (see {})",
+            got.dimensions(),
+            want.dimensions(),
+            actual.display()
+        );
+    }
+    let differ = got
+        .pixels()
+        .zip(want.pixels())
+        .filter(|(a, b)| (0..3).any(|c| (a[c] as i32 - b[c] as i32).abs() > REFERENCE_CODES))
+        .count();
+    let fraction = differ as f64 / (got.width() as f64 * got.height() as f64);
+    if fraction > REFERENCE_PIXELS {
+        std::fs::write(&actual, png).unwrap();
+        panic!(
+            "{name}: {:.2} % of the pixels differ from {} by more than {REFERENCE_CODES} codes \
+             (at most {:.0} % may; see {}; SKYDOME_BLESS=1 rewrites the reference)",
+            100.0 * fraction,
+            reference.display(),
+            100.0 * REFERENCE_PIXELS,
+            actual.display()
+        );
+    }
 }
 
 /// A 2:1 lat-long sky: blue gradient, soft clouds, a 1° sun 2^17 × the sky median at azimuth
@@ -139,6 +199,7 @@ fn response_curves_render_as_png_and_svg_with_labels() {
         "axes and text"
     );
     std::fs::write(pictures_dir().join("response_curves.png"), &png).unwrap();
+    check_reference("response_curves", &png);
     let svg = response_curves_svg(&curves, s, (900, 650)).unwrap();
     assert!(svg.starts_with("<svg"));
     for label in ["log exposure", "pixel value", "red", "green", "blue"] {
@@ -233,10 +294,15 @@ fn false_colour_maps_luminance_decades_to_the_ramp_and_keeps_masked_pixels_black
 }
 
 #[test]
-fn pictures_of_every_kind_are_written_for_inspection() {
+fn pictures_of_every_kind_match_their_reference_pictures() {
     let sky = synthetic_sky(1024);
     let (fish, circle) = fisheye_of(&sky, 600);
     let dir = pictures_dir();
+    // Written under target/pictures/ to look at, and compared with its reference picture.
+    let keep = |name: &str, png: &[u8]| {
+        std::fs::write(dir.join(format!("{name}.png")), png).unwrap();
+        check_reference(name, png);
+    };
 
     // Tone-mapped previews of the fish-eye dome, every operator.
     for op in skydome::tonemap::Operator::NAMES {
@@ -245,11 +311,7 @@ fn pictures_of_every_kind_are_written_for_inspection() {
             ..ToneMap::with_operator(op.parse().unwrap())
         };
         let out = tonemap_u8(&fish, &tm).unwrap();
-        std::fs::write(
-            dir.join(format!("preview_{op}.png")),
-            encode_png_rgb8(&out).unwrap(),
-        )
-        .unwrap();
+        keep(&format!("preview_{op}"), &encode_png_rgb8(&out).unwrap());
     }
     let out16 = tonemap_u16(&fish, &ToneMap::default()).unwrap();
     let png16 = encode_png_rgb16(&out16).unwrap();
@@ -258,7 +320,7 @@ fn pictures_of_every_kind_are_written_for_inspection() {
         back.as_raw() == &out16.data,
         "16-bit PNG does not round-trip"
     );
-    std::fs::write(dir.join("preview_aces_16bit.png"), png16).unwrap();
+    keep("preview_aces_16bit", &png16);
 
     // False colour, relative and in cd/m² (pretend 1 unit = 2000 cd/m²).
     let fc = false_colour(
@@ -269,7 +331,7 @@ fn pictures_of_every_kind_are_written_for_inspection() {
         },
     )
     .unwrap();
-    std::fs::write(dir.join("false_colour.png"), encode_png_rgb8(&fc).unwrap()).unwrap();
+    keep("false_colour", &encode_png_rgb8(&fc).unwrap());
     let fc_abs = false_colour(
         &fish,
         &FalseColour {
@@ -279,11 +341,7 @@ fn pictures_of_every_kind_are_written_for_inspection() {
         },
     )
     .unwrap();
-    std::fs::write(
-        dir.join("false_colour_cdm2.png"),
-        encode_png_rgb8(&fc_abs).unwrap(),
-    )
-    .unwrap();
+    keep("false_colour_cdm2", &encode_png_rgb8(&fc_abs).unwrap());
 
     // Histogram.
     let hist = log_luminance_histogram_png(&fish, Some(&circle), (900, 500)).unwrap();
@@ -294,13 +352,13 @@ fn pictures_of_every_kind_are_written_for_inspection() {
         st.robust_range_stops(0.1, 99.9)
     );
     assert!(st.dynamic_range_stops() > 17.0);
-    std::fs::write(dir.join("histogram.png"), hist).unwrap();
+    keep("histogram", &hist);
 
     // Lit spheres, camera facing north with the sun behind it (south-south-west).
     let spheres = render_spheres(&sky, &SphereScene::default(), &ToneMap::default()).unwrap();
     let mean: f64 = spheres.data.iter().map(|v| *v as f64).sum::<f64>() / spheres.data.len() as f64;
     assert!(mean > 30.0);
-    std::fs::write(dir.join("spheres.png"), encode_png_rgb8(&spheres).unwrap()).unwrap();
+    keep("spheres", &encode_png_rgb8(&spheres).unwrap());
     // Camera facing the sun: back-lit spheres, shadows towards the camera.
     let back_lit = render_spheres(
         &sky,
@@ -311,12 +369,8 @@ fn pictures_of_every_kind_are_written_for_inspection() {
         &ToneMap::default(),
     )
     .unwrap();
-    std::fs::write(
-        dir.join("spheres_backlit.png"),
-        encode_png_rgb8(&back_lit).unwrap(),
-    )
-    .unwrap();
+    keep("spheres_backlit", &encode_png_rgb8(&back_lit).unwrap());
     // The sky itself, lat-long.
     let ll = tonemap_u8(&sky, &ToneMap::default()).unwrap();
-    std::fs::write(dir.join("sky_latlong.png"), encode_png_rgb8(&ll).unwrap()).unwrap();
+    keep("sky_latlong", &encode_png_rgb8(&ll).unwrap());
 }

@@ -1,8 +1,7 @@
 //! A JPEG cut anywhere before its end-of-image marker is refused by name, never merged with a
 //! grey or black remainder (the decoder alone fills the missing rows and says nothing).
 
-mod common;
-
+use crate::common;
 use skydome::bracket::{self, BracketError, DecodeOptions};
 
 /// Cuts `bytes` at `offsets` and checks each cut is refused as a corrupt file named `name`.

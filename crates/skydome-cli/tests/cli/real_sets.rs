@@ -4,43 +4,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use crate::common::{data_dir, independent_readers};
+
 const BIN: &str = env!("CARGO_BIN_EXE_skydome");
-
-fn shared() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        // CI sets SKYDOME_REQUIRE_SHARED_DATA=1 so a broken data path fails instead of skipping.
-        assert!(
-            std::env::var("SKYDOME_REQUIRE_SHARED_DATA").as_deref() != Ok("1"),
-            "{} not found but SKYDOME_REQUIRE_SHARED_DATA=1",
-            p.display()
-        );
-        eprintln!("skipping: ../shared/data not found");
-        None
-    }
-}
-
-/// The Python that has cv2 and OpenImageIO, or `None` (then the check is skipped, unless
-/// SKYDOME_REQUIRE_INDEPENDENT_READERS=1, as in CI, where it fails).
-fn python() -> Option<String> {
-    let py = std::env::var("SKYDOME_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ok = Command::new(&py)
-        .args(["-c", "import cv2, OpenImageIO"])
-        .status()
-        .map(|s| s.success())
-        .unwrap_or(false);
-    if ok {
-        return Some(py);
-    }
-    assert!(
-        std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").as_deref() != Ok("1"),
-        "{py} lacks cv2/OpenImageIO but SKYDOME_REQUIRE_INDEPENDENT_READERS=1"
-    );
-    eprintln!("skipping independent readers: {py} lacks cv2/OpenImageIO (pip install -r scripts/requirements.txt)");
-    None
-}
 
 fn merge_set(dir: &Path, files: &[&str], extra: &[&str], out: &Path) -> serde_json::Value {
     let hdr = out.with_extension("hdr");
@@ -64,7 +30,7 @@ fn merge_set(dir: &Path, files: &[&str], extra: &[&str], out: &Path) -> serde_js
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(hdr.is_file() && exr.is_file());
-    if let Some(py) = python() {
+    if let Some(py) = independent_readers() {
         let script =
             Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/independent_readers.py");
         let c = Command::new(py)
@@ -86,7 +52,7 @@ fn merge_set(dir: &Path, files: &[&str], extra: &[&str], out: &Path) -> serde_js
 
 #[test]
 fn frobisher_merges_from_exif_alone() {
-    let Some(d) = shared() else { return };
+    let Some(d) = data_dir() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let s = merge_set(
         &d.join("frobisher_001"),
@@ -108,7 +74,7 @@ fn frobisher_merges_from_exif_alone() {
 
 #[test]
 fn banterle_room_merges_seven_frames() {
-    let Some(d) = shared() else { return };
+    let Some(d) = data_dir() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let names: Vec<String> = (0..7).map(|i| format!("stack_room_exp_{i}.jpg")).collect();
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
@@ -129,7 +95,7 @@ fn banterle_room_merges_seven_frames() {
 
 #[test]
 fn banterle_alignment_files_out_of_order_merge() {
-    let Some(d) = shared() else { return };
+    let Some(d) = data_dir() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let s = merge_set(
         &d.join("banterle_alignment"),
@@ -151,7 +117,7 @@ fn banterle_alignment_files_out_of_order_merge() {
 
 #[test]
 fn alpnach_fisheye_dome_finds_circle_and_sun() {
-    let Some(d) = shared() else { return };
+    let Some(d) = data_dir() else { return };
     let dir = d.join("skycam_alpnach_fisheye");
     let tmp = tempfile::tempdir().unwrap();
     // Frames 06..12; their times are not published, so rough ratios estimated from the pixels.
@@ -204,7 +170,7 @@ fn alpnach_fisheye_dome_finds_circle_and_sun() {
 
 #[test]
 fn frobisher_frame_cut_short_is_refused_by_name() {
-    let Some(data) = shared() else {
+    let Some(data) = data_dir() else {
         return;
     };
     let dir = data.join("frobisher_001");

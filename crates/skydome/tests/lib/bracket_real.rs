@@ -2,8 +2,7 @@
 
 use std::path::Path;
 
-mod common;
-use common::data_dir as shared;
+use crate::common::data_dir as shared;
 
 use skydome::bracket::{assemble, decode, DecodeOptions, OrientationPolicy};
 

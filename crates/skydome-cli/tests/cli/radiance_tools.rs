@@ -4,13 +4,11 @@
 //! from the `pyradiance` package (PyPI), found through `SKYDOME_PYTHON`; CI requires them
 //! (`SKYDOME_REQUIRE_INDEPENDENT_READERS=1`).
 
+use crate::common;
 use std::path::Path;
 use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_skydome");
-
-#[path = "../../skydome/tests/common/mod.rs"]
-mod common;
 
 fn evalglare_v(bin: &Path, lib: &Path, file: &Path) -> f64 {
     let o = Command::new(bin.join("evalglare"))

@@ -1,9 +1,7 @@
 //! Reprojection to equirect / angular / mirror-ball / fish-eye maps: conventions, energy
 //! (horizontal irradiance), sun direction, ground fill and anti-aliasing.
 
-mod fisheye_support;
-
-use fisheye_support::*;
+use crate::fisheye_support::*;
 use skydome::fisheye::{LensKind, LensProfile};
 use skydome::image::{Circle, HdrImage};
 use skydome::reproject::*;

@@ -1,7 +1,6 @@
 //! Tone-mapping properties on synthetic images with known answers, and on one real lat-long HDR.
 
-mod common;
-use common::data_dir;
+use crate::common::data_dir;
 use std::path::Path;
 
 use skydome::image::{luminance, Circle, HdrImage};

@@ -1,7 +1,7 @@
 //! Radiance merge against ground truth, OpenCV's measured figures, and real brackets.
-mod common;
-use common::data_dir;
-use common::load_jpegs;
+use crate::common;
+use crate::common::data_dir;
+use crate::common::load_jpegs;
 
 use skydome::bracket::{Frame, Pixels};
 use skydome::compare::{compare, well_exposed_mask, CompareOptions};

@@ -8,39 +8,13 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use crate::common::independent_readers;
 use skydome::formats::exr::{
     encode_exr, read_exr, ExrCompression, ExrOptions, ExrPixelType, Limits as ExrLimits,
 };
 use skydome::formats::rgbe::{decode_rgbe, encode_rgbe, Limits};
 use skydome::formats::{HdrMeta, PixelPoint, SunMark};
 use skydome::HdrImage;
-
-fn python() -> String {
-    std::env::var("SKYDOME_PYTHON").unwrap_or_else(|_| "python3".to_owned())
-}
-
-fn readers_available(py: &str) -> bool {
-    Command::new(py)
-        .args(["-c", "import cv2, OpenImageIO"])
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
-
-/// The Python interpreter, when it has both readers; `None` (test skipped) otherwise, unless
-/// `SKYDOME_REQUIRE_INDEPENDENT_READERS=1`, which makes that a failure.
-fn readers() -> Option<String> {
-    let py = python();
-    if readers_available(&py) {
-        return Some(py);
-    }
-    let required = std::env::var("SKYDOME_REQUIRE_INDEPENDENT_READERS").is_ok_and(|v| v == "1");
-    assert!(
-        !required,
-        "SKYDOME_REQUIRE_INDEPENDENT_READERS=1 but `{py} -c \"import cv2, OpenImageIO\"` fails; pip install numpy \"opencv-python-headless<5\" OpenImageIO"
-    );
-    eprintln!("skipping: `{py}` cannot import cv2 and OpenImageIO (set SKYDOME_PYTHON)");
-    None
-}
 
 /// A sky-like image spanning `stops` stops: a dim-to-bright gradient, a sun disc, noise.
 fn sky(width: usize, height: usize, stops: f64, seed: u64) -> HdrImage {
@@ -103,7 +77,7 @@ fn dump(path: &Path, data: &[f32]) {
 
 #[test]
 fn opencv_and_openimageio_read_our_hdr_and_exr_files() {
-    let Some(py) = readers() else {
+    let Some(py) = independent_readers() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -238,7 +212,7 @@ fn opencv_and_openimageio_read_our_hdr_and_exr_files() {
 /// a broken join would shift or garble everything after the first strip.
 #[test]
 fn opencv_and_openimageio_decode_our_strip_encoded_jpeg() {
-    let Some(py) = readers() else {
+    let Some(py) = independent_readers() else {
         return;
     };
     use skydome::formats::picture::{encode_rgb8, PictureFormat};

@@ -1,9 +1,7 @@
 //! Lens models, fits, profiles, circle detection and the dome crop, on synthetic ground truth
 //! and on the real Alpnach all-sky frames.
 
-mod fisheye_support;
-
-use fisheye_support::*;
+use crate::fisheye_support::*;
 use skydome::fisheye::*;
 use skydome::image::Circle;
 

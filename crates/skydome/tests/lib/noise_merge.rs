@@ -1,7 +1,7 @@
 //! The noise-aware merge (`Weighting::Noise`) against ground truth on phone-like brackets, the
 //! hat on the same frames, and OpenCV's Debevec merge on real brackets.
-mod common;
 
+use crate::common;
 use skydome::compare::well_exposed_mask;
 use skydome::merge::{merge, MergeOptions, Weighting};
 use skydome::noise::estimate;

@@ -1,8 +1,7 @@
 //! Radiance RGBE `.hdr`: conversion accuracy, round trips, header metadata, foreign files and
 //! hostile input.
 
-mod common;
-use common::data_dir;
+use crate::common::data_dir;
 use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
