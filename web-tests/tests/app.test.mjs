@@ -109,9 +109,13 @@ test('gallery path: a real bracket gives the same .hdr bytes as skydome merge', 
  *  at compass heading h is rotated by alpha = 360° − h about the vertical: quaternion
  *  (0, 0, sin(alpha/2), cos(alpha/2)). Set before the page loads, so the first event has it. */
 async function setHeading(page, heading) {
-  const cdp = page.__cdp || (page.__cdp = await page.context().newCDPSession(page));
+  let cdp = page.__cdp;
+  if (!cdp) {
+    cdp = page.__cdp = await page.context().newCDPSession(page);
+    // Once per page: Chromium refuses a second override of the same sensor.
+    await cdp.send('Emulation.setSensorOverrideEnabled', { enabled: true, type: 'absolute-orientation', metadata: { available: true } });
+  }
   const half = (((360 - heading) % 360) * Math.PI) / 360;
-  await cdp.send('Emulation.setSensorOverrideEnabled', { enabled: true, type: 'absolute-orientation', metadata: { available: true } });
   await cdp.send('Emulation.setSensorOverrideReadings', {
     type: 'absolute-orientation',
     reading: { quaternion: { x: 0, y: 0, z: Math.sin(half), w: Math.cos(half) } },
@@ -219,7 +223,7 @@ test('live overlay: the north point for a stored lens and the compass is the cor
   };
   const badFile = path.join(dir, 'bent_lens.json');
   const lens = JSON.parse(readFileSync(lensFile, 'utf8'));
-  writeFileSync(badFile, JSON.stringify({ ...lens, fov_deg: -10 }));
+  writeFileSync(badFile, JSON.stringify({ ...lens, circle: { ...lens.circle, r: -5 } }));
 
   const p = await phone(server.origin);
   try {
