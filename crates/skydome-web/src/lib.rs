@@ -191,7 +191,9 @@ pub fn run_mixed(
     options: &Options,
     progress: &mut dyn FnMut(&str, f64) -> bool,
 ) -> Result<Dome, WebError> {
-    run_photos(frames, times, options, &mut |stage, f| progress(stage.name(), f))
+    run_photos(frames, times, options, &mut |stage, f| {
+        progress(stage.name(), f)
+    })
 }
 
 /// [`run_mixed`] with the progress callback given the stage itself.
@@ -799,7 +801,10 @@ mod tests {
             assert_eq!(stage_position(*s), i, "{s:?}");
         }
         let p = StageProgress::new(Stage::Merging, 0.5);
-        assert_eq!((p.stage, p.fraction, p.overall), ("merging", 0.5, 3.5 / 6.0));
+        assert_eq!(
+            (p.stage, p.fraction, p.overall),
+            ("merging", 0.5, 3.5 / 6.0)
+        );
         assert_eq!(StageProgress::new(Stage::Pictures, 1.0).overall, 1.0);
         assert_eq!(StageProgress::new(Stage::Decoding, -1.0).overall, 0.0);
         assert_eq!(StageProgress::new(Stage::Lens, f64::NAN).fraction, 0.0);
