@@ -10,9 +10,9 @@ use std::path::Path;
 
 use encode::{Exif, Layout};
 use skydome::fisheye::LensKind;
-use skydome::formats::camera_profile::CameraProfile;
+use skydome::camera::CameraProfile;
 use skydome::formats::exr::{self, ExrCompression, ExrOptions, ExrPixelType};
-use skydome::formats::lens_profile::LensProfile;
+use skydome::fisheye::LensProfile;
 use skydome::formats::{rgbe, HdrMeta, PixelPoint, SunMark};
 use skydome::image::Circle;
 use skydome::HdrImage;

@@ -12,7 +12,9 @@
 //! announces a larger image must be refused before its pixels are allocated.
 
 use skydome::bracket::{self, DecodeOptions, OrientationPolicy};
-use skydome::formats::{camera_profile::CameraProfile, exr, lens_profile::LensProfile, rgbe};
+use skydome::camera::CameraProfile;
+use skydome::fisheye::LensProfile;
+use skydome::formats::{exr, rgbe};
 
 /// The pixel limit of every image target: 1 MP.
 pub const MAX_PIXELS: u64 = 1 << 20;

@@ -2,8 +2,8 @@
 //! and 16 bits, grey, with alpha, CMYK JPEG, and EXIF (exposure time, ISO, f-number,
 //! orientation) embedded as a camera writes it (JPEG `APP1 Exif`, PNG `eXIf`).
 //!
-//! Also included by `fuzz/examples/seeds.rs` (through `#[path]`), which writes the fuzzers'
-//! seed files with it.
+//! Included by path in the library's test binary (`tests/lib/main.rs`) and in
+//! `fuzz/examples/seeds.rs`, which writes the fuzzers' seed files with it.
 #![allow(dead_code)]
 
 use std::io::Cursor;
