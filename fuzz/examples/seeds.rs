@@ -9,10 +9,10 @@ mod encode;
 use std::path::Path;
 
 use encode::{Exif, Layout};
-use skydome::fisheye::LensKind;
 use skydome::camera::CameraProfile;
-use skydome::formats::exr::{self, ExrCompression, ExrOptions, ExrPixelType};
+use skydome::fisheye::LensKind;
 use skydome::fisheye::LensProfile;
+use skydome::formats::exr::{self, ExrCompression, ExrOptions, ExrPixelType};
 use skydome::formats::{rgbe, HdrMeta, PixelPoint, SunMark};
 use skydome::image::Circle;
 use skydome::HdrImage;
