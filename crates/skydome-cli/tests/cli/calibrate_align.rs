@@ -26,27 +26,33 @@ fn shifted_frame(i: usize, dx: i32, dy: i32, out: &Path) -> PathBuf {
     p
 }
 
-fn run(args: &[&std::ffi::OsStr]) -> serde_json::Value {
+fn run(args: &[std::ffi::OsString]) -> serde_json::Value {
     let o = Command::new(BIN).args(args).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
+/// `command FRAMES --times … EXTRA…` as arguments.
+fn args(command: &str, frames: &[PathBuf], extra: &[&std::ffi::OsStr]) -> Vec<std::ffi::OsString> {
+    let mut a: Vec<std::ffi::OsString> = vec![command.into()];
+    a.extend(frames.iter().map(|p| p.clone().into_os_string()));
+    a.extend(["--times".into(), "0.001,0.004,0.016".into()]);
+    a.extend(extra.iter().map(|&e| e.to_owned()));
+    a
+}
+
 fn calibrate(frames: &[PathBuf], align: bool, out: &Path) -> (serde_json::Value, Vec<Vec<f64>>) {
     let profile = out.join(format!("camera_{align}.json"));
-    let mut args: Vec<&std::ffi::OsStr> = vec!["calibrate".as_ref()];
-    args.extend(frames.iter().map(|p| p.as_os_str()));
-    args.extend(["--times".as_ref(), "0.001,0.004,0.016".as_ref()]);
-    args.extend([
+    let mut extra: Vec<&std::ffi::OsStr> = vec![
         "--circle".as_ref(),
         "200,200,192".as_ref(),
         "--json".as_ref(),
-    ]);
+    ];
     if align {
-        args.push("--align".as_ref());
+        extra.push("--align".as_ref());
     }
-    args.extend(["-o".as_ref(), profile.as_os_str()]);
-    let report = run(&args);
+    extra.extend(["-o".as_ref(), profile.as_os_str()]);
+    let report = run(&args("calibrate", frames, &extra));
     let p: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&profile).unwrap()).unwrap();
     let g = (0..3)
@@ -96,16 +102,13 @@ fn calibrate_align_finds_the_shifts_merge_finds_and_recovers_the_steady_curve() 
 
     // merge --align reports the very same shifts on the same files.
     let hdr = moved_dir.join("m.hdr");
-    let mut args: Vec<&std::ffi::OsStr> = vec!["merge".as_ref()];
-    args.extend(moved.iter().map(|p| p.as_os_str()));
-    args.extend(["--times".as_ref(), "0.001,0.004,0.016".as_ref()]);
-    args.extend([
+    let extra: [&std::ffi::OsStr; 4] = [
         "--align".as_ref(),
         "--json".as_ref(),
         "-o".as_ref(),
         hdr.as_os_str(),
-    ]);
-    let merged = run(&args);
+    ];
+    let merged = run(&args("merge", &moved, &extra));
     assert_eq!(merged["alignment"], aligned["alignment"]);
 
     // Aligned, the curve is the steady bracket's; unaligned, samples mix scene points.

@@ -589,11 +589,9 @@ pub fn consistency(frames: &[Frame], r: &Response, merged: &skydome::HdrImage) -
             for p in 0..f.width * f.height {
                 let z = [code(3 * p), code(3 * p + 1), code(3 * p + 2)];
                 if z.iter().all(|z| (40..=235).contains(z)) {
-                    for c in 0..3 {
+                    for (c, &zc) in z.iter().enumerate() {
                         let m = f64::from(merged.data[3 * p + c]).max(1e-30).ln();
-                        d.push(
-                            ((r.curve(c)[z[c] as usize] - lt - m) / std::f64::consts::LN_2).abs(),
-                        );
+                        d.push(((r.curve(c)[zc as usize] - lt - m) / std::f64::consts::LN_2).abs());
                     }
                 }
             }
