@@ -8,7 +8,7 @@ use skydome::formats::rgbe::encode_rgbe;
 use skydome::formats::{HdrMeta, PixelPoint, SunMark};
 use skydome::image::{Circle, HdrImage, RgbImage};
 use skydome::plot;
-use skydome::response::CameraProfile;
+use skydome::camera::CameraProfile;
 
 /// A radiance map with a smooth ramp, a bright spot and some noise (xorshift, fixed seed).
 fn sky(width: usize, height: usize) -> HdrImage {
