@@ -1,0 +1,51 @@
+//! # skydome for Python
+//!
+//! A PyO3 module (`skydome._skydome`, re-exported by the `skydome` package) over the same
+//! entry point as the command line and the phone app, [`skydome::pipeline::run`]. Like them it
+//! is a shell: it maps Python arguments onto [`skydome::pipeline::Options`], moves bytes and
+//! numpy arrays, shows progress and raises errors; every rule about images is the library's,
+//! so `Dome.save("x.hdr")` writes the very bytes `skydome merge … -o x.hdr` writes
+//! (`tests/test_cli_equality.py`).
+//!
+//! Conventions are the library's: pixels origin top-left, `x` right, `y` down, arrays indexed
+//! `[row, column, channel]` = `[y, x, (R, G, B)]`; angles in degrees; azimuth from true north
+//! towards east; exposure times in seconds; radiance linear, relative units unless a luminance
+//! or illuminance reading made it absolute (Radiance's W·sr⁻¹·m⁻²).
+//!
+//! The GIL is released while the core computes (decoding, calibration, merge, sky, pictures,
+//! encoding, file reads and writes), so threads run several jobs at once. Copies of pixel data:
+//! a numpy frame is copied once into the core (which frees each frame while it merges); a
+//! result array (`Dome.radiance`, `Dome.preview`, `Dome.equirect`) is a read-only view of the
+//! core's own buffer, not a copy; `read_hdr` hands over the decoder's buffer; `write_hdr` and
+//! `tonemap` copy their input array once.
+
+mod arrays;
+mod dome;
+mod errors;
+mod files;
+mod frames;
+mod hdr;
+mod options;
+mod profile;
+mod progress;
+
+use pyo3::prelude::*;
+
+pub use errors::Error;
+
+/// The native part of the `skydome` package (`import skydome` re-exports everything here).
+#[pymodule]
+fn _skydome(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("Error", m.py().get_type::<Error>())?;
+    m.add("__version__", skydome::VERSION)?;
+    m.add_class::<dome::Dome>()?;
+    m.add_class::<profile::CameraProfile>()?;
+    m.add_function(wrap_pyfunction!(dome::run, m)?)?;
+    m.add_function(wrap_pyfunction!(profile::calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(hdr::read_hdr, m)?)?;
+    m.add_function(wrap_pyfunction!(hdr::write_hdr, m)?)?;
+    m.add_function(wrap_pyfunction!(hdr::tonemap, m)?)?;
+    m.add_function(wrap_pyfunction!(dome::_dome_from_state, m)?)?;
+    m.add_function(wrap_pyfunction!(profile::_profile_from_json, m)?)?;
+    Ok(())
+}
