@@ -33,7 +33,10 @@ pub unsafe fn view<'py, T: Element + Copy>(
 }
 
 /// An (H, W, 3) numpy array that takes over `img`'s buffer (no copy).
-pub fn owned<T: Element + Copy>(py: Python<'_>, img: RgbImage<T>) -> PyResult<Bound<'_, PyArray3<T>>> {
+pub fn owned<T: Element + Copy>(
+    py: Python<'_>,
+    img: RgbImage<T>,
+) -> PyResult<Bound<'_, PyArray3<T>>> {
     let (h, w) = (img.height, img.width);
     PyArray1::from_vec(py, img.data).reshape([h, w, 3])
 }
@@ -47,9 +50,12 @@ pub fn describe(obj: &Bound<'_, PyAny>) -> Option<(String, Vec<usize>)> {
 
 /// Checks that `obj` is an (H, W, 3) numpy array; returns (height, width).
 pub fn rgb_shape(arg: &str, obj: &Bound<'_, PyAny>) -> PyResult<(usize, usize)> {
-    let a = obj
-        .cast::<PyUntypedArray>()
-        .map_err(|_| type_error(arg, format!("expected a numpy array, got {}", type_name(obj))))?;
+    let a = obj.cast::<PyUntypedArray>().map_err(|_| {
+        type_error(
+            arg,
+            format!("expected a numpy array, got {}", type_name(obj)),
+        )
+    })?;
     let s = a.shape();
     if s.len() != 3 || s[2] != 3 || s[0] == 0 || s[1] == 0 {
         return Err(value_error(
@@ -66,10 +72,12 @@ pub fn rgb_shape(arg: &str, obj: &Bound<'_, PyAny>) -> PyResult<(usize, usize)> 
 /// The samples of an (H, W, 3) array of `T`, row-major, copied once.
 pub fn copy_samples<T: Element + Copy>(arr: &Bound<'_, PyArray3<T>>) -> Vec<T> {
     let r = arr.readonly();
+    // `as_slice` also accepts Fortran order, whose memory order is not row-major: only a
+    // C-contiguous array is copied as one block.
     match r.as_slice() {
-        Ok(s) => s.to_vec(),
-        // Not C-contiguous (a slice, a transposed view): numpy's logical order is row-major.
-        Err(_) => r.as_array().iter().copied().collect(),
+        Ok(s) if arr.is_c_contiguous() => s.to_vec(),
+        // A slice, a transposed view, Fortran order: numpy's logical order is row-major.
+        _ => r.as_array().iter().copied().collect(),
     }
 }
 

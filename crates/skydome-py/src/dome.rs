@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use numpy::PyArray3;
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyTuple};
+use pyo3::types::{PyBytes, PyDict, PyTuple};
 use skydome::formats::exr::{ExrOptions, ExrPixelType};
 use skydome::formats::{self, HdrMeta, RadianceFormat};
 use skydome::pipeline;
@@ -13,8 +13,9 @@ use skydome::{HdrImage, RgbImage};
 use crate::errors::{error, value_error};
 use crate::frames::{self, Failure};
 use crate::options::RunArgs;
-use crate::profile::{finish, json_loads, warn_all, CameraProfile};
+use crate::profile::{finish, warn_all, CameraProfile};
 use crate::progress::{self, Bridge};
+use crate::pyvalue::ser_to_py;
 
 /// The result of :func:`skydome.run`: the radiance map, its header, the report, and the
 /// products asked for.
@@ -28,7 +29,7 @@ use crate::progress::{self, Bridge};
 pub struct Dome {
     radiance: HdrImage,
     meta: HdrMeta,
-    report_json: String,
+    report: serde_json::Value,
     preview: Option<RgbImage<u8>>,
     equirect: Option<(HdrImage, HdrMeta)>,
     camera_profile: Option<skydome::response::CameraProfile>,
@@ -63,7 +64,7 @@ impl Dome {
     /// north, photometry, warnings, …). A new dict on every access.
     #[getter]
     fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        json_loads(py, &self.report_json)
+        crate::pyvalue::to_py(py, &self.report)
     }
 
     /// The header metadata of the radiance map as a dict: ``exposure`` (Radiance's
@@ -169,8 +170,10 @@ impl Dome {
         )
     }
 
-    /// Pickling: the dome's buffers and metadata as bytes and JSON.
-    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+    /// Pickling: the dome's buffers as bytes, its metadata as dicts (floats exact).
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
         let py = slf.py();
         let d = slf.get();
         let f = py.import("skydome._skydome")?.getattr("_dome_from_state")?;
@@ -178,24 +181,31 @@ impl Dome {
             let bytes: Vec<u8> = img.data.iter().flat_map(|v| v.to_le_bytes()).collect();
             (img.width, img.height, PyBytes::new(py, &bytes))
         };
-        let meta_json = |m: &HdrMeta| serde_json::to_string(m).unwrap_or_default();
-        let state = (
-            image(&d.radiance),
-            meta_json(&d.meta),
-            d.report_json.clone(),
+        let state = PyDict::new(py);
+        state.set_item("radiance", image(&d.radiance))?;
+        state.set_item("meta", ser_to_py(py, &d.meta)?)?;
+        state.set_item("report", crate::pyvalue::to_py(py, &d.report)?)?;
+        state.set_item(
+            "preview",
             d.preview
                 .as_ref()
                 .map(|p| (p.width, p.height, PyBytes::new(py, &p.data))),
-            d.equirect
-                .as_ref()
-                .map(|(img, m)| (image(img), meta_json(m))),
-            d.camera_profile.as_ref().map(|p| p.to_json()),
-            d.inputs
-                .iter()
-                .map(|p| p.to_string_lossy().to_string())
-                .collect::<Vec<_>>(),
-        );
-        Ok((f, PyTuple::new(py, [state.into_pyobject(py)?.into_any()])?))
+        )?;
+        match &d.equirect {
+            Some((img, m)) => state.set_item("equirect", (image(img), ser_to_py(py, m)?))?,
+            None => state.set_item("equirect", py.None())?,
+        }
+        match &d.camera_profile {
+            Some(p) => state.set_item("camera_profile", ser_to_py(py, p)?)?,
+            None => state.set_item("camera_profile", py.None())?,
+        }
+        let inputs: Vec<String> = d
+            .inputs
+            .iter()
+            .map(|p| p.to_string_lossy().to_string())
+            .collect();
+        state.set_item("inputs", inputs)?;
+        Ok((f, PyTuple::new(py, [state])?))
     }
 }
 
@@ -203,20 +213,9 @@ type ImageState = (usize, usize, Vec<u8>);
 
 /// Unpickles a dome (used by ``Dome.__reduce__``).
 #[pyfunction]
-#[allow(clippy::type_complexity)]
-pub fn _dome_from_state(
-    state: (
-        ImageState,
-        String,
-        String,
-        Option<ImageState>,
-        Option<(ImageState, String)>,
-        Option<String>,
-        Vec<String>,
-    ),
-) -> PyResult<Dome> {
-    let (radiance, meta, report_json, preview, equirect, profile, inputs) = state;
+pub fn _dome_from_state(state: &Bound<'_, PyDict>) -> PyResult<Dome> {
     let bad = |what: &str| error(format!("cannot unpickle the dome: bad {what}"));
+    let item = |k: &str| -> PyResult<Bound<'_, PyAny>> { state.get_item(k)?.ok_or_else(|| bad(k)) };
     let image = |(w, h, bytes): ImageState| -> PyResult<HdrImage> {
         let data: Vec<f32> = bytes
             .chunks_exact(4)
@@ -224,24 +223,30 @@ pub fn _dome_from_state(
             .collect();
         HdrImage::from_vec(w, h, data).ok_or_else(|| bad("image"))
     };
-    let meta_of = |s: &str| serde_json::from_str::<HdrMeta>(s).map_err(|_| bad("header"));
+    let meta_of = |o: &Bound<'_, PyAny>| -> PyResult<HdrMeta> {
+        serde_json::from_value(crate::pyvalue::from_py("state", o)?).map_err(|_| bad("header"))
+    };
+    let preview: Option<ImageState> = item("preview")?.extract()?;
+    let equirect: Option<(ImageState, Bound<'_, PyAny>)> = item("equirect")?.extract()?;
+    let profile = item("camera_profile")?;
+    let inputs: Vec<String> = item("inputs")?.extract()?;
     Ok(Dome {
-        radiance: image(radiance)?,
-        meta: meta_of(&meta)?,
-        report_json,
+        radiance: image(item("radiance")?.extract()?)?,
+        meta: meta_of(&item("meta")?)?,
+        report: crate::pyvalue::from_py("state", &item("report")?)?,
         preview: match preview {
-            Some((w, h, data)) => Some(RgbImage::from_vec(w, h, data).ok_or_else(|| bad("preview"))?),
+            Some((w, h, data)) => {
+                Some(RgbImage::from_vec(w, h, data).ok_or_else(|| bad("preview"))?)
+            }
             None => None,
         },
         equirect: match equirect {
             Some((img, m)) => Some((image(img)?, meta_of(&m)?)),
             None => None,
         },
-        camera_profile: match profile {
-            Some(p) => Some(
-                skydome::response::CameraProfile::from_json(&p).map_err(|_| bad("profile"))?,
-            ),
-            None => None,
+        camera_profile: match profile.is_none() {
+            true => None,
+            false => Some(crate::profile::profile_from_py(&profile)?),
         },
         inputs: inputs.into_iter().map(PathBuf::from).collect(),
     })
@@ -283,7 +288,8 @@ pub fn save_radiance(
     let warnings = py
         .detach(|| -> Result<Vec<String>, String> {
             let name = p.display();
-            let e = formats::encode_radiance(img, meta, format).map_err(|e| format!("{name}: {e}"))?;
+            let e =
+                formats::encode_radiance(img, meta, format).map_err(|e| format!("{name}: {e}"))?;
             crate::files::write_atomic(&p, &e.bytes, inputs)?;
             Ok(e.warnings.iter().map(|w| format!("{name}: {w}")).collect())
         })
@@ -293,8 +299,7 @@ pub fn save_radiance(
 
 /// Header metadata as a dict.
 pub fn meta_dict<'py>(py: Python<'py>, meta: &HdrMeta) -> PyResult<Bound<'py, PyAny>> {
-    let json = serde_json::to_string(meta).map_err(|e| error(e.to_string()))?;
-    json_loads(py, &json)
+    ser_to_py(py, meta)
 }
 
 /// Runs the whole sky-dome job on a bracket, as ``skydome merge``: decode, lens, response,
@@ -419,11 +424,11 @@ pub fn run<'py>(
         dome.report.response = format!("profile {}", p.display());
     }
     warn_all(py, &dome.report.warnings)?;
-    let report_json = serde_json::to_string(&dome.report).map_err(|e| error(e.to_string()))?;
+    let report = serde_json::to_value(&dome.report).map_err(|e| error(e.to_string()))?;
     Ok(Dome {
         radiance: dome.radiance,
         meta: dome.meta,
-        report_json,
+        report,
         preview: dome.preview,
         equirect: dome.equirect,
         camera_profile: dome.camera_profile,

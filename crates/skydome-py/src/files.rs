@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use pyo3::prelude::*;
 
-use crate::errors::{error, type_error};
+use crate::errors::type_error;
 
 /// A path argument: `str` or `os.PathLike` (not bytes, not other objects).
 pub fn path_arg(arg: &str, obj: &Bound<'_, PyAny>) -> PyResult<PathBuf> {
@@ -81,9 +81,4 @@ pub fn write_atomic(p: &Path, bytes: &[u8], inputs: &[PathBuf]) -> Result<(), St
     tmp.persist(p)
         .map_err(|e| format!("{name}: cannot rename into place: {}", e.error))?;
     Ok(())
-}
-
-/// `skydome.Error` for a file error message.
-pub fn file_error(message: String) -> PyErr {
-    error(message)
 }

@@ -107,10 +107,7 @@ impl Failure {
 }
 
 /// Extracts `frames` and `times`.
-pub fn extract(
-    frames: &Bound<'_, PyAny>,
-    times: Option<&Bound<'_, PyAny>>,
-) -> PyResult<Bracket> {
+pub fn extract(frames: &Bound<'_, PyAny>, times: Option<&Bound<'_, PyAny>>) -> PyResult<Bracket> {
     if frames.is_instance_of::<PyString>()
         || frames.is_instance_of::<PyBytes>()
         || frames.hasattr("__fspath__")?

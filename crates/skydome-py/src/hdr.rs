@@ -168,16 +168,30 @@ fn meta_arg(h: &Bound<'_, PyAny>) -> PyResult<HdrMeta> {
             .extract()
             .map_err(|_| type_error("header", "keys must be strings"))?;
         if known.get(&k).is_none() {
-            let names: Vec<&String> = known.as_object().map(|o| o.keys().collect()).unwrap_or_default();
+            let names: Vec<&String> = known
+                .as_object()
+                .map(|o| o.keys().collect())
+                .unwrap_or_default();
             return Err(value_error(
                 "header",
                 format!(
                     "unknown key '{k}'; expected some of: {}",
-                    names.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")
+                    names
+                        .iter()
+                        .map(|s| s.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 ),
             ));
         }
     }
-    let text = crate::profile::json_dumps(d.as_any())?;
-    serde_json::from_str(&text).map_err(|e| value_error("header", e))
+    // Missing keys keep their defaults.
+    let mut value = known;
+    if let (Some(base), serde_json::Value::Object(given)) = (
+        value.as_object_mut(),
+        crate::pyvalue::from_py("header", d.as_any())?,
+    ) {
+        base.extend(given);
+    }
+    serde_json::from_value(value).map_err(|e| value_error("header", e))
 }

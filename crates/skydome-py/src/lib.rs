@@ -28,6 +28,7 @@ mod hdr;
 mod options;
 mod profile;
 mod progress;
+mod pyvalue;
 
 use pyo3::prelude::*;
 
@@ -46,6 +47,6 @@ fn _skydome(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(hdr::write_hdr, m)?)?;
     m.add_function(wrap_pyfunction!(hdr::tonemap, m)?)?;
     m.add_function(wrap_pyfunction!(dome::_dome_from_state, m)?)?;
-    m.add_function(wrap_pyfunction!(profile::_profile_from_json, m)?)?;
+    m.add_function(wrap_pyfunction!(profile::_profile_from_dict, m)?)?;
     Ok(())
 }

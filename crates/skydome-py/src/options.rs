@@ -140,7 +140,10 @@ impl RunArgs<'_> {
                 let d: f64 = n.extract().map_err(|_| {
                     type_error(
                         "north",
-                        format!("expected degrees (a number) or 'from-sun', got {}", type_name(n)),
+                        format!(
+                            "expected degrees (a number) or 'from-sun', got {}",
+                            type_name(n)
+                        ),
                     )
                 })?;
                 if !d.is_finite() {

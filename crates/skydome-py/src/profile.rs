@@ -62,9 +62,9 @@ impl CameraProfile {
         self.inner.to_json()
     }
 
-    /// The profile as a dict (the JSON's fields).
+    /// The profile as a dict (the JSON's fields, floats exact).
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        json_loads(py, &self.inner.to_json())
+        crate::pyvalue::ser_to_py(py, &self.inner)
     }
 
     /// The response curves, float64 array of shape (3, 256): row c is g_c(Z) = ln E + ln Δt
@@ -137,21 +137,33 @@ impl CameraProfile {
         )
     }
 
+    /// Pickling: the profile as a dict (exact floats).
     fn __reduce__<'py>(
         slf: &Bound<'py, Self>,
-    ) -> PyResult<(Bound<'py, PyAny>, (String,))> {
+    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyAny>,))> {
         let py = slf.py();
         let f = py
             .import("skydome._skydome")?
-            .getattr("_profile_from_json")?;
-        Ok((f, (slf.get().inner.to_json(),)))
+            .getattr("_profile_from_dict")?;
+        Ok((f, (crate::pyvalue::ser_to_py(py, &slf.get().inner)?,)))
     }
 }
 
 /// Unpickles a profile (used by ``CameraProfile.__reduce__``).
 #[pyfunction]
-pub fn _profile_from_json(text: &str) -> PyResult<CameraProfile> {
-    CameraProfile::from_json(text)
+pub fn _profile_from_dict(d: &Bound<'_, PyAny>) -> PyResult<CameraProfile> {
+    Ok(CameraProfile {
+        inner: profile_from_py(d)?,
+    })
+}
+
+/// A profile from its dict (exact floats), validated.
+pub fn profile_from_py(d: &Bound<'_, PyAny>) -> PyResult<response::CameraProfile> {
+    let v = crate::pyvalue::from_py("profile", d)?;
+    let p: response::CameraProfile =
+        serde_json::from_value(v).map_err(|e| value_error("profile", e))?;
+    p.response().map_err(|e| value_error("profile", e))?;
+    Ok(p)
 }
 
 /// Reads and validates a camera profile, naming the file as the command line does.
@@ -173,11 +185,6 @@ pub fn json_dumps(obj: &Bound<'_, PyAny>) -> PyResult<String> {
         .import("json")?
         .call_method1("dumps", (obj,))?
         .extract()
-}
-
-/// `json.loads(text)`.
-pub fn json_loads<'py>(py: Python<'py>, text: &str) -> PyResult<Bound<'py, PyAny>> {
-    py.import("json")?.call_method1("loads", (text,))
 }
 
 /// Calibrates the camera's response on a bracket (Debevec–Malik), as ``skydome calibrate``.
@@ -249,8 +256,8 @@ pub fn calibrate(
     let mut bridge = Bridge::new(progress::callback_arg(progress)?);
     let result = py.detach(|| -> Result<_, Failure> {
         let input = bracket.into_input()?;
-        let br = pipeline::load_bracket(input, &mut |p| bridge.event(p))
-            .map_err(Failure::Pipeline)?;
+        let br =
+            pipeline::load_bracket(input, &mut |p| bridge.event(p)).map_err(Failure::Pipeline)?;
         if bridge.stage("calibrating", 0.0).is_break() {
             return Err(Failure::Pipeline(pipeline::PipelineError::Cancelled));
         }
@@ -305,7 +312,14 @@ pub fn warn_all(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
     }
     let w = py.import("warnings")?;
     for m in warnings {
-        w.call_method1("warn", (m.as_str(), py.get_type::<pyo3::exceptions::PyUserWarning>(), 2))?;
+        w.call_method1(
+            "warn",
+            (
+                m.as_str(),
+                py.get_type::<pyo3::exceptions::PyUserWarning>(),
+                2,
+            ),
+        )?;
     }
     Ok(())
 }

@@ -98,7 +98,7 @@ def test_missing_file():
 def test_wrong_dtype_and_shape(scene):
     radiance, times = scene
     frames = photograph(radiance, times)
-    with pytest.raises(TypeError, match=r"^frames\[2\]: expected a uint8 or uint16 array .*got dtype <f4"):
+    with pytest.raises(TypeError, match=r"^frames\[2\]: expected a uint8 or uint16 array .*got dtype float32; convert with"):
         skydome.run(frames[:2] + [frames[2].astype(np.float32)], times)
     with pytest.raises(ValueError, match=r"^frames\[0\]: expected an array of shape \(height, width, 3\).*got shape \(\d+, \d+\)$"):
         skydome.run([frames[0][..., 0]] + frames[1:], times)
