@@ -233,3 +233,32 @@ fn frobisher_frame_cut_short_is_refused_by_name() {
         assert!(!out.exists());
     }
 }
+
+/// The street set's list (`name time 1/time`, a `#` header) is read and matched to the files by
+/// name; the bracket is then refused for what it is: the camera ignored the bracket.
+#[test]
+fn ssarcandy_three_column_list_is_read_and_the_ignored_bracket_refused() {
+    let Some(data) = shared() else {
+        return;
+    };
+    let dir = data.join("ssarcandy_street");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("street.hdr");
+    let o = Command::new(BIN)
+        .arg("merge")
+        .args((92..=102).map(|i| dir.join(format!("DSC_{i:04}.png"))))
+        .arg("--times-file")
+        .arg(dir.join("image_list.txt"))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("the camera probably ignored the bracket"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}

@@ -612,25 +612,16 @@ pub fn photo_exposure(name: String, bytes: Vec<u8>) -> Result<String, JsError> {
 }
 
 /// Exposure times for photos without EXIF from a list file in the command line's
-/// `--times-file` format (lines `FILE TIME`, `#` comments; times as `0.004` or `1/250`):
-/// the times of `names`, in that order, in seconds.
+/// `--times-file` format (lines `FILE TIME` or `FILE TIME 1/TIME`, `#` comments; times as `0.004`
+/// or `1/250`): the times of `names`, in that order, in seconds, matched as the command line
+/// matches them ([`skydome::bracket::times_from_list`]).
 pub fn times_from_list(
     list_name: &str,
     text: &str,
     names: &[String],
 ) -> Result<Vec<f64>, WebError> {
-    let pairs = skydome::bracket::parse_list_file(list_name, text)
-        .map_err(|e| WebError::Pipeline(e.into()))?;
-    names
-        .iter()
-        .map(|n| {
-            pairs
-                .iter()
-                .find(|(file, _)| file == n)
-                .map(|(_, t)| *t)
-                .ok_or_else(|| WebError::Profile(format!("{list_name}: no exposure time for {n}")))
-        })
-        .collect()
+    skydome::bracket::times_from_list(list_name, text, names)
+        .map_err(|e| WebError::Pipeline(e.into()))
 }
 
 /// [`times_from_list`] for the page.

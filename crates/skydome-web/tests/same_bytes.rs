@@ -121,8 +121,46 @@ fn times_list_names_the_missing_file() {
     .expect_err("b has no time");
     assert_eq!(
         skydome_web::sentence(&e.to_string()),
-        "times.txt: no exposure time for b.jpg."
+        "b.jpg: not listed in times.txt; add a line 'b.jpg TIME'."
     );
+}
+
+/// The page names photos by file name, the command line by the paths it was given: one list
+/// gives both the same times (the command line calls `skydome::bracket::times_from_list` with
+/// the paths), whether it names files by path or by name, in two or three columns.
+#[test]
+fn times_list_gives_the_page_and_the_command_line_the_same_times() {
+    let list = "# Filename exposure 1/shutter_speed\n\
+                shots/a.jpg 1/400 400\n\
+                /elsewhere/b.jpg 0.01\n\
+                c.jpg 0.04 25\n";
+    let names: Vec<String> = ["a.jpg", "b.jpg", "c.jpg"].map(String::from).to_vec();
+    let paths: Vec<String> = names.iter().map(|n| format!("shots/{n}")).collect();
+    let page = times_from_list("times.txt", list, &names).expect("page");
+    let cli = skydome::bracket::times_from_list("times.txt", list, &paths).expect("cli");
+    assert_eq!(page, [1.0 / 400.0, 0.01, 0.04]);
+    assert_eq!(page, cli);
+
+    let dir = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/ssarcandy_street"
+    );
+    match std::fs::read_to_string(format!("{dir}/image_list.txt")) {
+        Ok(list) => {
+            let names: Vec<String> = (92..=102).map(|i| format!("DSC_{i:04}.png")).collect();
+            let paths: Vec<String> = names.iter().map(|n| format!("{dir}/{n}")).collect();
+            let page = times_from_list("image_list.txt", &list, &names).expect("page");
+            let cli =
+                skydome::bracket::times_from_list("image_list.txt", &list, &paths).expect("cli");
+            assert_eq!(page, cli);
+            assert_eq!(page[0], 1.0 / 1024.0);
+            assert_eq!(page[10], 1.0);
+        }
+        Err(_) if std::env::var_os("SKYDOME_REQUIRE_SHARED_DATA").is_some() => {
+            panic!("{dir}/image_list.txt is missing")
+        }
+        Err(_) => eprintln!("skipping the ssarcandy list: {dir} is missing"),
+    }
 }
 
 /// The warm-up the worker runs after loading goes through the whole pipeline without error (a

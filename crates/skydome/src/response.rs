@@ -49,6 +49,7 @@
 
 use crate::bracket::Frame;
 use crate::image::Circle;
+use crate::merge::Weighting;
 use crate::sampling::{sample, SampleOptions, SampleReport, Samples, SamplingError};
 
 /// Number of 8-bit codes.
@@ -119,29 +120,6 @@ pub enum ResponseError {
         found: u32,
     },
 }
-
-/// How frames are weighted when merging (see [`crate::merge`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Weighting {
-    /// Every frame counts equally: the seed's eq. 4, an unweighted mean of `g(Z) − ln Δt`.
-    /// Clipped values pull the mean down ("dark suns"); kept for reproducing the seed.
-    None,
-    /// Debevec's hat, zero at 0 and 255, with full weight for the shortest frame above
-    /// mid-grey and for the longest below it (the default).
-    #[default]
-    Hat,
-    /// Inverse variance of each vote under a camera noise model (shot, read, quantisation and
-    /// JPEG noise; see [`crate::noise`]), evaluated at the code the frame is *expected* to read
-    /// given the hat's first estimate (two passes, as Granados et al. 2010): a longer exposure,
-    /// which collected more light, counts for more. Zero at the black level and 255, fading to
-    /// zero over the top codes; a frame expected within 5 codes of clipping gets no weight. On
-    /// phone-like brackets about 30 % less error than the hat on the sky, at about 5× the hat's
-    /// merge time (6 MP: 133 ms against 23 ms on 2 cores, the noise model given).
-    Noise,
-}
-
-crate::named_enum!(Weighting, "weighting", [None => "none", Hat => "hat", Noise => "noise"]);
 
 /// Debevec's hat weight of an 8-bit code: `z` up to 127, `255 − z` above; zero at 0 and 255.
 #[inline]

@@ -80,3 +80,31 @@ fn no_real_set_is_mistaken_for_identical_frames() {
     let times: Vec<f64> = (0..13).map(|i| 2f64.powi(i)).collect();
     assemble(dec, Some(&times), OrientationPolicy::Apply).unwrap();
 }
+
+#[test]
+fn ssarcandy_three_column_list_matches_its_11_files_by_base_name() {
+    let Some(d) = shared() else { return };
+    let dir = d.join("ssarcandy_street");
+    let list = std::fs::read_to_string(dir.join("image_list.txt")).unwrap();
+    let paths: Vec<String> = (92..=102)
+        .map(|i| dir.join(format!("DSC_{i:04}.png")).display().to_string())
+        .collect();
+    let times = skydome::bracket::times_from_list("image_list.txt", &list, &paths).unwrap();
+    let want: Vec<f64> = (0..11).map(|k| 2f64.powi(k - 10)).collect();
+    assert_eq!(times, want);
+    // The list names 11 files; a frame it does not name is refused by name.
+    let e =
+        skydome::bracket::times_from_list("image_list.txt", &list, &["DSC_0091.png"]).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "DSC_0091.png: not listed in image_list.txt; add a line 'DSC_0091.png TIME'"
+    );
+    // A third column that is not 1/time names its line.
+    let bad = list.replace("0.125           8", "0.125          16");
+    let e = skydome::bracket::parse_list_file("image_list.txt", &bad).unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("image_list.txt line 5: third column 16 is not 1/time"),
+        "{e}"
+    );
+}

@@ -1,7 +1,8 @@
 //! The camera-profile JSON format: a camera's response curves (and noise model), made once per
 //! device by calibration and reused by every merge.
 
-use crate::response::{Response, ResponseError, Weighting};
+use crate::merge::Weighting;
+use crate::response::{Response, ResponseError};
 
 /// Current [`CameraProfile`] format version.
 pub const PROFILE_VERSION: u32 = 1;
