@@ -19,6 +19,17 @@
 //! core's own buffer, not a copy; `read_hdr` hands over the decoder's buffer; `write_hdr` and
 //! `tonemap` copy their input array once.
 
+// The command line's allocator (huge pages for large buffers), shared by path rather than
+// copied: a run from Python makes the same few large buffers, and with 4 KiB pages their first
+// writes are page faults worth about a quarter of a 6 MP job's CPU time (see the module's doc).
+// Rust's allocations in this extension (the core's buffers, and the numpy arrays handed over
+// from them, which Rust frees) go through it; Python's and numpy's own memory does not.
+#[path = "../../skydome-cli/src/alloc.rs"]
+mod alloc;
+
+#[global_allocator]
+static ALLOCATOR: alloc::HugePageAlloc = alloc::HugePageAlloc;
+
 mod arrays;
 mod dome;
 mod errors;
