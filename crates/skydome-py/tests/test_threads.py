@@ -1,56 +1,68 @@
 """The GIL is released while the core computes; progress, cancellation and Ctrl-C."""
 
 import _thread
+import sys
 import threading
 
 import numpy as np
 import pytest
 import skydome
-from conftest import demo_frames
+from conftest import demo_frames, run_cli
 
 
-def test_two_threads_merge_two_brackets_at_once(synth_brackets):
-    """Thread A marks when it enters the merge (a progress event) and when it leaves it; thread
-    B, started once A is inside, records what it sees from its own progress callback. B's Python
-    code can run while A is between those two events only if A's core released the GIL: with
-    the GIL held through the core, B would see A 'in the merge' never (A's events would all come
-    before any of B's). The noise weighting makes A's merge the longest stage (about 0.1-0.3 s on
-    this bracket), so B is scheduled inside it with a wide margin."""
-    (fa, ta), (fb, tb) = synth_brackets[0], synth_brackets[1]
-    a_in_core = threading.Event()
-    a_left = threading.Event()
-    seen_by_b = []
+@pytest.fixture(scope="module")
+def long_bracket(cli, tmp_path_factory):
+    """A 768 px synthetic bracket: a run long enough (a few hundred ms with the noise weighting)
+    for another thread to be scheduled inside it."""
+    d = tmp_path_factory.mktemp("long")
+    run_cli(cli, "synth", "-o", d, "--size", 768, "--seed", 5)
+    lines = [ln.split() for ln in (d / "times.txt").read_text().splitlines()
+             if ln.strip() and not ln.startswith("#")]
+    return [d / n for n, _ in lines], [float(t) for _, t in lines]
+
+
+def test_two_threads_merge_two_brackets_at_once(long_bracket, synth_brackets):
+    """With time-based GIL switching switched off (a switch interval of 1000 s), a thread that
+    holds the GIL keeps it until it blocks or releases it. Thread B waits until thread A's run
+    has started (A's first progress event), then runs its own job. Had A's core kept the GIL, B
+    could not wake before A's run ended, and all of B's progress events would come after all of
+    A's; they interleave only because the core runs without the GIL. (The one way this test can
+    fail with the GIL released: B not scheduled at all during A's whole run.)"""
+    (fa, ta), (fb, tb) = long_bracket, synth_brackets[1]
+    a_started = threading.Event()
     events = []
+    results = {}
 
     def progress_a(stage, fraction):
         events.append(("a", stage, fraction))
-        if stage == "merging" and fraction == 0.0:
-            a_in_core.set()
-        if stage == "merging" and fraction == 1.0:
-            a_left.set()
-
-    def progress_b(stage, fraction):
-        events.append(("b", stage, fraction))
-        seen_by_b.append(a_in_core.is_set() and not a_left.is_set())
-
-    results = {}
+        a_started.set()
 
     def job_a():
         results["a"] = skydome.run(fa, ta, weighting="noise", progress=progress_a)
 
     def job_b():
-        assert a_in_core.wait(120), "thread A never reached its merge"
-        results["b"] = skydome.run(fb, tb, progress=progress_b)
+        assert a_started.wait(120), "thread A never started"
+        results["b"] = skydome.run(
+            fb, tb, progress=lambda s, f: events.append(("b", s, f))
+        )
 
-    threads = [threading.Thread(target=job_a), threading.Thread(target=job_b)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(300)
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(1000.0)
+    try:
+        threads = [threading.Thread(target=job_b), threading.Thread(target=job_a)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(300)
+    finally:
+        sys.setswitchinterval(old)
     assert set(results) == {"a", "b"}, "a thread failed"
-    assert any(seen_by_b), (
-        "thread B never ran Python while thread A was inside its merge: the GIL was not "
-        f"released (events: {events})"
+    who = [e[0] for e in events]
+    first_b = who.index("b")
+    last_a = len(who) - 1 - who[::-1].index("a")
+    assert first_b < last_a, (
+        "thread B ran only after thread A's run had ended: the GIL was not released "
+        f"(events: {events})"
     )
     # Both results are what a lone run gives.
     assert np.array_equal(results["a"].radiance, skydome.run(fa, ta, weighting="noise").radiance)
