@@ -2,6 +2,9 @@
 //! through `skydome::pipeline` directly, on the bundled fish-eye bracket with several option
 //! sets; and the page's JSON reaches the pipeline unchanged.
 
+#[path = "../../skydome/tests/common/required.rs"]
+mod required;
+
 use skydome::formats::{encode_radiance, PixelPoint, RadianceFormat};
 use skydome::pipeline::{self, EncodedFrame, Frames, Input, Options, SunMode};
 use skydome_web::{
@@ -201,36 +204,27 @@ fn overlay_on_request_is_the_runs_overlay() {
 /// message the run gives; parts that do not belong together are refused.
 #[test]
 fn photos_decoded_in_other_workers_give_the_same_bytes() {
-    let shared = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/frobisher_001"
-    );
     let (demo_frames, demo_times) = demo();
     let fisheye = r#"{"lens": {"detect": {"model": "stereographic", "fov_deg": 235, "circle": null}},
             "sky": {"crop": true, "north_deg": 37, "sun": "auto"}, "products": {"preview": true}}"#;
     let mut sets = vec![(demo_frames, Some(demo_times), fisheye)];
-    match std::fs::read_dir(shared) {
-        Ok(dir) => {
-            let mut v: Vec<EncodedFrame> = dir
-                .filter_map(Result::ok)
-                .map(|e| e.path())
-                .filter(|p| p.extension().is_some_and(|x| x == "jpg"))
-                .map(|p| EncodedFrame {
-                    name: p
-                        .file_name()
-                        .map(|n| n.to_string_lossy().into_owned())
-                        .unwrap_or_default(),
-                    bytes: std::fs::read(&p).expect("frobisher frame"),
-                })
-                .collect();
-            v.sort_by(|a, b| a.name.cmp(&b.name));
-            assert_eq!(v.len(), 3);
-            sets.push((v, None, "{}"));
-        }
-        Err(_) if std::env::var_os("SKYDOME_REQUIRE_SHARED_DATA").is_some() => {
-            panic!("{shared} is missing")
-        }
-        Err(_) => eprintln!("skipping the EXIF set: {shared} is missing"),
+    if let Some(shared) = required::shared_data("frobisher_001") {
+        let mut v: Vec<EncodedFrame> = std::fs::read_dir(&shared)
+            .expect("frobisher_001")
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|x| x == "jpg"))
+            .map(|p| EncodedFrame {
+                name: p
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+                bytes: std::fs::read(&p).expect("frobisher frame"),
+            })
+            .collect();
+        v.sort_by(|a, b| a.name.cmp(&b.name));
+        assert_eq!(v.len(), 3);
+        sets.push((v, None, "{}"));
     }
     for (frames, times, json) in sets {
         let o = parse_options(json).expect("options");

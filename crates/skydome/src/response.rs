@@ -1,4 +1,4 @@
-//! Camera response calibration (Debevec & Malik 1997) and camera profiles.
+//! Camera response calibration (Debevec & Malik 1997).
 //!
 //! A pixel value `Z` is a fixed, monotonic function of the sensor exposure `E · Δt`; Debevec &
 //! Malik recover its log inverse `g(Z) = ln E + ln Δt` (natural log, one curve per colour
@@ -40,8 +40,8 @@
 //! value by linear interpolation of `g` at `v / 257` ([`Response::g16`]).
 //!
 //! ## Camera profiles
-//! [`CameraProfile`] stores a response as JSON (see its docs for the fields); readers check the
-//! `version`, lengths, finiteness and monotonicity.
+//! [`crate::camera::CameraProfile`] stores a response (with a noise model) as JSON; readers
+//! check the `version`, lengths, finiteness and monotonicity ([`Response::from_curves`]).
 //!
 //! References: P. Debevec, J. Malik, *Recovering High Dynamic Range Radiance Maps from
 //! Photographs*, SIGGRAPH 1997; Å. Björck, *Stability analysis of the method of seminormal
@@ -49,16 +49,15 @@
 
 use crate::bracket::Frame;
 use crate::image::Circle;
-use crate::merge::Weighting;
 use crate::sampling::{sample, SampleOptions, SampleReport, Samples, SamplingError};
 
 /// Number of 8-bit codes.
 pub const LEVELS: usize = 256;
 /// The code whose `g` is fixed to zero.
 pub const GAUGE: usize = 128;
-// The camera-profile JSON format lives with the other formats; re-exported here, where the
-// response it stores is defined.
-pub use crate::formats::camera_profile::{CameraProfile, PROFILE_VERSION};
+/// The camera-profile format version ([`crate::camera::CameraProfile`]), defined here because
+/// [`ResponseError::Version`] names it.
+pub const PROFILE_VERSION: u32 = 1;
 /// [`stability`] calls a calibration unstable when the RMS (over `z = 10..=245` and the three
 /// channels) of the standard deviation of `g(z)` across runs exceeds this many natural-log
 /// units (0.05 ≈ 5 % in radiance ≈ 0.07 stops): well above the spread of a good 8-bit bracket
@@ -304,24 +303,6 @@ impl Calibration {
             }
         }
         (xs, ys)
-    }
-
-    /// A profile for this calibration (camera fields empty; the CLI fills them).
-    pub fn to_profile(&self) -> CameraProfile {
-        CameraProfile {
-            version: PROFILE_VERSION,
-            linear: false,
-            g: self.response.g.clone(),
-            lambda: self.lambda,
-            weighting: Weighting::Hat,
-            samples: self.samples.report.used,
-            seed: self.samples.report.seed,
-            make: None,
-            model: None,
-            iso: None,
-            date: None,
-            noise: None,
-        }
     }
 }
 

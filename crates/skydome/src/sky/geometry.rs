@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{Direction, SkyError};
 use crate::fisheye::{LensProfile, Projection};
-use crate::formats::PixelPoint;
+use crate::image::PixelPoint;
 use crate::image::Circle;
 
 /// How the phone lay while taking the sky photos (which camera looked at the zenith).
@@ -492,17 +492,6 @@ impl SkyGeometry {
                 }
             })
     }
-}
-
-/// Radiance's luminous efficacy of its RGB "watts", lm/W: its tools (`pvalue -o`, `evalglare`,
-/// `falsecolor`) take luminance = 179 × (0.265 R + 0.670 G + 0.065 B).
-pub const RADIANCE_EFFICACY: f64 = 179.0;
-
-/// Luminance (or illuminance, from irradiance) of a linear RGB radiance the way Radiance's tools
-/// compute it: `179 × (0.265 R + 0.670 G + 0.065 B)`; cd/m² (or lux) when the radiance is in
-/// Radiance's W·sr⁻¹·m⁻², in relative units otherwise.
-pub fn radiance_luminance(rgb: [f64; 3]) -> f64 {
-    RADIANCE_EFFICACY * (0.265 * rgb[0] + 0.670 * rgb[1] + 0.065 * rgb[2])
 }
 
 /// How the phone lay, when not level (see [`SkyGeometry::with_level`]).

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::SkyError;
-use crate::formats::PixelPoint;
+use crate::image::PixelPoint;
 use crate::image::{luminance, Circle, HdrImage, RgbImage};
 
 /// A detected sun.
