@@ -32,7 +32,7 @@ pub struct Dome {
     report: serde_json::Value,
     preview: Option<RgbImage<u8>>,
     equirect: Option<(HdrImage, HdrMeta)>,
-    camera_profile: Option<skydome::response::CameraProfile>,
+    camera_profile: Option<skydome::camera::CameraProfile>,
     /// The job's input files, never overwritten by `save`.
     inputs: Vec<PathBuf>,
 }

@@ -180,7 +180,7 @@ impl RunArgs<'_> {
 /// `profile`: a `CameraProfile` or the path of a camera.json.
 fn profile_arg(
     p: &Bound<'_, PyAny>,
-) -> PyResult<(skydome::response::CameraProfile, Option<PathBuf>)> {
+) -> PyResult<(skydome::camera::CameraProfile, Option<PathBuf>)> {
     if let Ok(c) = p.cast::<crate::profile::CameraProfile>() {
         return Ok((c.get().inner.clone(), None));
     }

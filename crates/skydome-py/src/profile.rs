@@ -22,7 +22,7 @@ use crate::progress::{self, Bridge};
 #[pyclass(frozen, module = "skydome", eq)]
 #[derive(Clone, PartialEq)]
 pub struct CameraProfile {
-    pub inner: response::CameraProfile,
+    pub inner: skydome::camera::CameraProfile,
 }
 
 #[pymethods]
@@ -43,7 +43,8 @@ impl CameraProfile {
     #[staticmethod]
     #[pyo3(signature = (text))]
     fn from_json(text: &str) -> PyResult<Self> {
-        let inner = response::CameraProfile::from_json(text).map_err(|e| error(e.to_string()))?;
+        let inner =
+            skydome::camera::CameraProfile::from_json(text).map_err(|e| error(e.to_string()))?;
         Ok(Self { inner })
     }
 
@@ -158,21 +159,21 @@ pub fn _profile_from_dict(d: &Bound<'_, PyAny>) -> PyResult<CameraProfile> {
 }
 
 /// A profile from its dict (exact floats), validated.
-pub fn profile_from_py(d: &Bound<'_, PyAny>) -> PyResult<response::CameraProfile> {
+pub fn profile_from_py(d: &Bound<'_, PyAny>) -> PyResult<skydome::camera::CameraProfile> {
     let v = crate::pyvalue::from_py("profile", d)?;
-    let p: response::CameraProfile =
+    let p: skydome::camera::CameraProfile =
         serde_json::from_value(v).map_err(|e| value_error("profile", e))?;
     p.response().map_err(|e| value_error("profile", e))?;
     Ok(p)
 }
 
 /// Reads and validates a camera profile, naming the file as the command line does.
-pub fn read_profile(p: &Path) -> PyResult<response::CameraProfile> {
+pub fn read_profile(p: &Path) -> PyResult<skydome::camera::CameraProfile> {
     let text = std::fs::read_to_string(p)
         .map_err(|e| error(format!("{}: cannot read: {e}", p.display())))?;
     let name = p.display();
-    let profile =
-        response::CameraProfile::from_json(&text).map_err(|e| error(format!("{name}: {e}")))?;
+    let profile = skydome::camera::CameraProfile::from_json(&text)
+        .map_err(|e| error(format!("{name}: {e}")))?;
     profile
         .response()
         .map_err(|e| error(format!("{name}: {e}")))?;
@@ -262,7 +263,7 @@ pub fn calibrate(
             return Err(Failure::Pipeline(pipeline::PipelineError::Cancelled));
         }
         let (mut profile, warnings) = if linear {
-            (response::CameraProfile::linear(), Vec::new())
+            (skydome::camera::CameraProfile::linear(), Vec::new())
         } else {
             let cal = response::calibrate(&br.frames, circle, &opts)
                 .map_err(|e| Failure::Message(format!("calibration failed: {e}")))?;
@@ -275,7 +276,10 @@ pub fn calibrate(
             .into_iter()
             .flatten()
             .collect();
-            (cal.to_profile(), warnings)
+            (
+                skydome::camera::CameraProfile::from_calibration(&cal),
+                warnings,
+            )
         };
         pipeline::describe_camera(&mut profile, &br);
         let mut all = br.warnings.clone();
