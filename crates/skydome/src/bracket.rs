@@ -150,6 +150,10 @@ pub struct CaptureInfo {
     pub datetime_original: Option<String>,
     /// UTC offset of the capture time, `±HH:MM` (`OffsetTimeOriginal`, else `OffsetTime`).
     pub utc_offset: Option<String>,
+    /// Fraction of a second of the capture time, as written (`SubSecTimeOriginal`: the digits
+    /// after the decimal point, `"25"` = 0.25 s).
+    #[serde(default)]
+    pub subsec_original: Option<String>,
     /// Latitude in degrees, north positive (`GPSLatitude` + `GPSLatitudeRef`).
     pub gps_latitude_deg: Option<f64>,
     /// Longitude in degrees, east positive (`GPSLongitude` + `GPSLongitudeRef`).
@@ -651,6 +655,57 @@ pub fn decode(
     Ok(frame)
 }
 
+/// A file's EXIF exposure and capture metadata, read without decoding its pixels (what a batch
+/// needs to group a folder of frames into captures).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FileMetadata {
+    /// Exposure time in seconds, when EXIF has a valid one.
+    pub exposure_time_s: Option<f64>,
+    /// Capture metadata (time, offset, GPS, camera).
+    pub info: CaptureInfo,
+}
+
+impl FileMetadata {
+    /// The capture's local clock reading with its fraction of a second
+    /// (`DateTimeOriginal` + `SubSecTimeOriginal`), when EXIF has the time.
+    pub fn local_time(&self) -> Option<time::PrimitiveDateTime> {
+        let t = parse_exif_datetime(self.info.datetime_original.as_deref()?)?;
+        let frac = self
+            .info
+            .subsec_original
+            .as_deref()
+            .map(str::trim)
+            .filter(|s| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit()))
+            .and_then(|s| format!("0.{s}").parse::<f64>().ok())
+            .unwrap_or(0.0);
+        Some(t + time::Duration::seconds_f64(frac))
+    }
+}
+
+/// Reads a file's EXIF (JPEG, PNG, TIFF bytes) without decoding its pixels. A file without
+/// readable EXIF gives empty metadata.
+pub fn read_metadata(bytes: &[u8]) -> FileMetadata {
+    let mut frame = DecodedFrame {
+        name: String::new(),
+        width: 0,
+        height: 0,
+        pixels: Pixels::U8(Vec::new()),
+        exif_time_s: None,
+        iso: None,
+        f_number: None,
+        info: CaptureInfo {
+            orientation: 1,
+            ..CaptureInfo::default()
+        },
+        non_srgb_icc: None,
+    };
+    read_exif(bytes, &mut frame);
+    FileMetadata {
+        exposure_time_s: frame.exif_time_s,
+        info: frame.info,
+    }
+}
+
 /// Fills exposure and capture metadata from the file's EXIF, when it has any.
 /// Checks that a JPEG stream is whole: every marker segment fits in the file and the scans end
 /// with the end-of-image marker.
@@ -765,6 +820,7 @@ fn read_exif(bytes: &[u8], frame: &mut DecodedFrame) {
     info.model = text(Tag::Model);
     info.datetime_original = text(Tag::DateTimeOriginal);
     info.utc_offset = text(Tag::OffsetTimeOriginal).or_else(|| text(Tag::OffsetTime));
+    info.subsec_original = text(Tag::SubSecTimeOriginal);
     info.gps_latitude_deg = dms(Tag::GPSLatitude, Tag::GPSLatitudeRef);
     info.gps_longitude_deg = dms(Tag::GPSLongitude, Tag::GPSLongitudeRef);
     info.white_balance = get(Tag::WhiteBalance).and_then(|v| v.get_uint(0));

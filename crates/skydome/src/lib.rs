@@ -47,6 +47,7 @@
 //! `wasm32-unknown-unknown`.
 
 pub mod align;
+pub mod batch;
 pub mod bracket;
 pub mod compare;
 mod fastmath;
