@@ -771,7 +771,7 @@ fn process(
     let reused = mine.len() - todo.len();
     let bar = bar(quiet, todo.len() as u64);
     if !quiet && reused > 0 {
-        bar.println(format!(
+        crate::out(&format!(
             "resuming: {reused} of {} captures already done with these options",
             mine.len()
         ));

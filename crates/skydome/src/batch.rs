@@ -418,9 +418,10 @@ pub struct CaptureRow {
     pub warnings: Vec<String>,
     /// How the sun was found (`detected`, `ephemeris`, `tap`), or none.
     pub sun_source: Option<String>,
-    /// Sun azimuth, degrees from true north towards east, when known.
+    /// Sun azimuth, degrees from true north towards east: the computed (ephemeris) sun when
+    /// time and site are known, else the sun found in the image (needs north).
     pub sun_azimuth_deg: Option<f64>,
-    /// Sun elevation above the horizon, degrees, when known (observed, else computed).
+    /// Sun elevation above the horizon, degrees, as [`CaptureRow::sun_azimuth_deg`].
     pub sun_elevation_deg: Option<f64>,
     /// Angle between the observed and the computed sun, degrees, when both exist.
     pub sun_ephemeris_angle_deg: Option<f64>,
@@ -459,10 +460,10 @@ impl CaptureRow {
         let absolute = r.photometry.is_some();
         if let Some(g) = &r.geometry {
             self.sun_source = g.sun_source.map(|s| s.to_string());
-            let (az, el) = match (&g.sun, &g.sun_ephemeris) {
-                (Some(s), _) if s.elevation_deg.is_some() => (s.azimuth_deg, s.elevation_deg),
-                (_, Some(e)) => (Some(e.azimuth_deg), Some(e.elevation_deg)),
-                (Some(s), None) => (s.azimuth_deg, s.elevation_deg),
+            // The sun's true place when time and site are known; else where it was found.
+            let (az, el) = match (&g.sun_ephemeris, &g.sun) {
+                (Some(e), _) => (Some(e.azimuth_deg), Some(e.elevation_deg)),
+                (None, Some(s)) => (s.azimuth_deg, s.elevation_deg),
                 (None, None) => (None, None),
             };
             self.sun_azimuth_deg = az;
