@@ -63,7 +63,7 @@ fn batch(inputs: &[&Path], out: &Path, extra: &[&str]) -> Output {
 
 fn csv(out: &Path) -> Vec<Vec<String>> {
     let t = std::fs::read_to_string(out.join("captures.csv")).unwrap();
-    t.lines().map(|l| split_csv(l)).collect()
+    t.lines().map(split_csv).collect()
 }
 
 /// Splits one CSV line (RFC 4180 quotes).
