@@ -29,8 +29,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use skydome::batch::{self, CaptureRow, Grouping, ManifestRow, Shard};
 use skydome::bracket::{self, DecodeOptions, OrientationPolicy};
+use skydome::merge::Weighting;
 use skydome::pipeline::{self, EncodedFrame, Frames, Input, Options, Products, ResponseSource};
-use skydome::response::Weighting;
 
 use crate::calibrate::CalibArgs;
 use crate::geometry::GeometryArgs;
