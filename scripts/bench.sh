@@ -55,6 +55,34 @@ echo "building skydome (release)…" >&2
 cargo build --release -q -p skydome-cli
 SKYDOME="$PWD/target/release/skydome"
 
+if [ ! -x "$VENV/bin/python" ]; then
+  python3 -m venv "$VENV"
+fi
+"$VENV/bin/pip" install --quiet --disable-pip-version-check numpy opencv-python-headless Pillow
+PY="$VENV/bin/python"
+HELPER="$PWD/scripts/bench_helper.py"
+
+# synth SIZE EVS DIR: a synthetic fish-eye bracket (JPEG frames, times.txt), made once.
+synth() {
+  local size="$1" evs="$2" dir="$3"
+  if [ ! -f "$dir/times.txt" ]; then
+    mkdir -p "$dir"
+    "$SKYDOME" synth -o "$dir" --size "$size" --evs="$evs" --seed 1 --quiet --force
+  fi
+}
+frames_of() { awk -v d="$1" '!/^#/ && NF {printf "%s/%s ", d, $1}' "$1/times.txt"; }
+times_of() { awk '!/^#/ && NF {printf "%s%s", (n++?",":""), $2}' "$1/times.txt"; }
+
+# timed NAME CMD...: runs CMD once under /usr/bin/time, appends "wall_s peak_kB user_s sys_s" to
+# $WORK/NAME.txt.
+timed() {
+  local name="$1"; shift
+  /usr/bin/time -f "%e %M %U %S" -o "$WORK/.time" "$@" >/dev/null 2>"$WORK/.stderr" || {
+    echo "bench.sh: $name failed:" >&2; cat "$WORK/.stderr" >&2; exit 1; }
+  cat "$WORK/.time" >> "$WORK/$name.txt"
+}
+
+# --- --batch: the station benchmark (issue #21) ----------------------------------------------
 if [ "$BATCH" = 1 ]; then
   N="${SKYDOME_BENCH_CAPTURES:-8}"
   DOME=(--fisheye --lens-model equidistant --fov 235 --crop)
@@ -108,33 +136,6 @@ for size, mp in [(2448, "3 × 6 MP"), (3464, "3 × 12 MP")]:
 PY
   exit 0
 fi
-
-if [ ! -x "$VENV/bin/python" ]; then
-  python3 -m venv "$VENV"
-fi
-"$VENV/bin/pip" install --quiet --disable-pip-version-check numpy opencv-python-headless Pillow
-PY="$VENV/bin/python"
-HELPER="$PWD/scripts/bench_helper.py"
-
-# synth SIZE EVS DIR: a synthetic fish-eye bracket (JPEG frames, times.txt), made once.
-synth() {
-  local size="$1" evs="$2" dir="$3"
-  if [ ! -f "$dir/times.txt" ]; then
-    mkdir -p "$dir"
-    "$SKYDOME" synth -o "$dir" --size "$size" --evs="$evs" --seed 1 --quiet --force
-  fi
-}
-frames_of() { awk -v d="$1" '!/^#/ && NF {printf "%s/%s ", d, $1}' "$1/times.txt"; }
-times_of() { awk '!/^#/ && NF {printf "%s%s", (n++?",":""), $2}' "$1/times.txt"; }
-
-# timed NAME CMD...: runs CMD once under /usr/bin/time, appends "wall_s peak_kB user_s sys_s" to
-# $WORK/NAME.txt.
-timed() {
-  local name="$1"; shift
-  /usr/bin/time -f "%e %M %U %S" -o "$WORK/.time" "$@" >/dev/null 2>"$WORK/.stderr" || {
-    echo "bench.sh: $name failed:" >&2; cat "$WORK/.stderr" >&2; exit 1; }
-  cat "$WORK/.time" >> "$WORK/$name.txt"
-}
 
 # --- The head-to-head on 3 × 2448² ------------------------------------------------------------
 B="$WORK/bracket_2448_3"
