@@ -18,6 +18,7 @@ mod bracket_real;
 mod bracket_zoo;
 mod calibration;
 mod curve_range;
+mod exif_stations;
 mod film_scan;
 mod fisheye;
 mod fisheye_overlay;
