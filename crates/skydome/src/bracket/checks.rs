@@ -42,6 +42,7 @@ pub fn assemble_with_black_level(
     let (frames, info) = oriented_and_sorted_by_exposure(decoded, times, orientation)?;
     neighbours_at_least_a_sixth_stop_apart(&frames)?;
     let (frames, checks) = frames_that_inform(frames, black_level, &mut warnings)?;
+    one_scene(&frames, &checks)?;
     no_identical_neighbours(&frames, &checks)?;
     no_frame_darker_when_exposed_longer(&frames, &checks)?;
     let pixel_orientation = match orientation {
@@ -293,6 +294,51 @@ fn frames_that_inform(
         false => compare_neighbours(&kept, &dark),
     };
     Ok((kept, checks))
+}
+
+/// Every frame shows its neighbours' scene ([`PairCheck::other_scene`]). A frame is named
+/// alone only when that is certain: both its pairs are of two scenes, or (at an end of the
+/// exposure order) its one pair is while its neighbour was found to show the scene of the frame
+/// beyond. Otherwise the refusal names both frames of every pair of two scenes.
+fn one_scene(frames: &[Frame], checks: &[PairCheck]) -> Result<(), BracketError> {
+    let bad = |k: usize| checks.get(k).is_some_and(|c| c.other_scene == Some(true));
+    let good = |k: usize| checks.get(k).is_some_and(|c| c.other_scene == Some(false));
+    if !(0..checks.len()).any(bad) {
+        return Ok(());
+    }
+    let last = frames.len() - 1;
+    // Pair k joins frames k and k + 1.
+    let odd = |k: usize| match k {
+        0 => bad(0) && good(1),
+        k if k == last => bad(k - 1) && k >= 2 && good(k - 2),
+        k => bad(k - 1) && bad(k),
+    };
+    let alone: Vec<usize> = (0..=last).filter(|&k| odd(k)).collect();
+    let explained = |k: usize| alone.contains(&k) || alone.contains(&(k + 1));
+    let mut files = alone.clone();
+    let mut others: Vec<usize> = alone
+        .iter()
+        .flat_map(|&k| [k.checked_sub(1), (k < last).then_some(k + 1)])
+        .flatten()
+        .filter(|k| !alone.contains(k))
+        .collect();
+    // Pairs no single frame explains: both frames, and no "others" to compare with.
+    let unexplained: Vec<usize> = (0..checks.len())
+        .filter(|&k| bad(k) && !explained(k))
+        .collect();
+    if !unexplained.is_empty() {
+        files.extend(unexplained.iter().flat_map(|&k| [k, k + 1]));
+        others.clear();
+    }
+    files.sort_unstable();
+    files.dedup();
+    others.sort_unstable();
+    others.dedup();
+    let names = |v: Vec<usize>| v.into_iter().map(|k| frames[k].name.clone()).collect();
+    Err(BracketError::OtherScene {
+        files: names(files),
+        others: names(others),
+    })
 }
 
 /// No two neighbours carry (nearly) the same picture although their exposures differ. A
@@ -591,15 +637,33 @@ struct PairCheck {
     /// must belong to other photos. Noise, JPEG and a little motion make a few samples darker
     /// in any real bracket; a majority needs swapped times.
     darker_when_longer: bool,
+    /// Whether the two frames show two scenes; `None` when too little is picture in both to
+    /// tell. The frames are cut into an 8 × 8 grid of blocks; per channel, a block's mean over
+    /// the samples that are picture in both frames (at least 4 of them) orders it against every
+    /// other block. A longer exposure and any tone curve keep the order of two blocks that
+    /// differ clearly (by 2 % of full scale in both frames); noise, JPEG, moving clouds and an
+    /// unaligned hand-held bracket reverse a few (the real sets in `../shared/data`: at most
+    /// 8 %); a photo of another scene or view reverses about half or more. Two scenes when more
+    /// than a third of at least 100 such pairs of blocks are reversed.
+    other_scene: Option<bool>,
 }
+
+/// The grid of blocks whose mean brightness orders [`PairCheck::other_scene`].
+const GRID: usize = 8;
 
 /// Compares two frames on the samples of every 7th pixel, in one pass over both.
 fn compare_pair(a: &Frame, b: &Frame, dark: &Dark) -> PairCheck {
     let n = a.pixels.len().min(b.pixels.len());
     let (mut sa, mut sb, mut sad, mut count) = (0f64, 0f64, 0f64, 0usize);
     let (mut darker, mut brighter) = (0usize, 0usize);
+    // Per block of an 8 × 8 grid and channel, the sums of both frames' samples.
+    let (w, h) = (a.width.max(1), a.height.max(1));
+    let mut blocks = [[[0f64; 3]; 2]; GRID * GRID];
+    let mut in_block = [[0usize; 3]; GRID * GRID];
     let mut i = 0;
     while i + 2 < n {
+        let (x, y) = ((i / 3) % w, (i / 3) / w);
+        let k = (y * GRID / h).min(GRID - 1) * GRID + (x * GRID / w).min(GRID - 1);
         for c in 0..3 {
             let (va, vb) = (a.pixels.unit(i + c), b.pixels.unit(i + c));
             let d = vb - va;
@@ -614,6 +678,9 @@ fn compare_pair(a: &Frame, b: &Frame, dark: &Dark) -> PairCheck {
                 sb += f64::from(vb);
                 sad += f64::from((va - vb).abs());
                 count += 1;
+                blocks[k][0][c] += f64::from(va);
+                blocks[k][1][c] += f64::from(vb);
+                in_block[k][c] += 1;
             }
         }
         i += 21;
@@ -625,8 +692,31 @@ fn compare_pair(a: &Frame, b: &Frame, dark: &Dark) -> PairCheck {
         let (ma, mb) = (sa / count as f64, sb / count as f64);
         (ma - mb).abs() < 0.02 * ma.max(mb) && sad / (count as f64) < 0.015
     };
+    // Every two blocks that differ clearly in both frames: ordered alike, or the other way round.
+    let (mut same_order, mut reversed) = (0usize, 0usize);
+    // A block's mean in a channel, where at least 4 of its samples are picture in both frames.
+    let mean = |k: usize, f: usize, c: usize| {
+        (in_block[k][c] >= 4).then(|| blocks[k][f][c] / in_block[k][c] as f64)
+    };
+    for c in 0..3 {
+        let means: Vec<(f64, f64)> = (0..GRID * GRID)
+            .filter_map(|k| Some((mean(k, 0, c)?, mean(k, 1, c)?)))
+            .collect();
+        for (i, p) in means.iter().enumerate() {
+            for q in &means[i + 1..] {
+                let (da, db) = (q.0 - p.0, q.1 - p.1);
+                if da.abs() > 0.02 && db.abs() > 0.02 {
+                    match (da > 0.0) == (db > 0.0) {
+                        true => same_order += 1,
+                        false => reversed += 1,
+                    }
+                }
+            }
+        }
+    }
     PairCheck {
         identical,
         darker_when_longer: darker >= 100 && darker > brighter,
+        other_scene: (same_order + reversed >= 100).then_some(3 * reversed > same_order + reversed),
     }
 }

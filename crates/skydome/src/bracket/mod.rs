@@ -451,6 +451,15 @@ pub enum BracketError {
         /// The largest claimed difference within a group, in stops.
         stops: f64,
     },
+    /// Frames whose bright and dark parts lie elsewhere than in their neighbours': photos of
+    /// another scene (or another view) given with the bracket.
+    #[error("{}", other_scene(.files, .others))]
+    OtherScene {
+        /// Every frame that does not show its neighbours' scene, in exposure order.
+        files: Vec<String>,
+        /// The frames they were compared with (their neighbours in exposure order).
+        others: Vec<String>,
+    },
     /// A frame exposed longer than another is darker at most pixels: the exposure times do not
     /// belong to the photos.
     #[error("{} at most pixels although {} exposed longer: the exposure times do not belong to these photos (swapped or mistyped); check them", .pairs.iter().map(|p| format!("{} ({}) is darker than {} ({})", p.file, p.e1, p.other, p.e2)).collect::<Vec<_>>().join("; "), if .pairs.len() == 1 { "it was" } else { "each was" })]
@@ -498,6 +507,28 @@ fn and_list<S: AsRef<str>>(names: &[S]) -> String {
             last.as_ref()
         ),
     }
+}
+
+/// The sentence of [`BracketError::OtherScene`].
+fn other_scene(files: &[String], others: &[String]) -> String {
+    let one = files.len() == 1;
+    let (it, its) = if one {
+        ("it", "its")
+    } else {
+        ("them", "their")
+    };
+    if others.is_empty() {
+        return format!(
+            "{} do not show one scene: their bright and dark parts lie in different places (a photo of another scene or another view in the bracket); leave out the one that does not belong, or retake it",
+            and_list(files)
+        );
+    }
+    format!(
+        "{} {} not show the scene of {}: {its} bright and dark parts lie elsewhere (a photo of another scene or another view in the bracket); leave {it} out or retake {it}",
+        and_list(files),
+        if one { "does" } else { "do" },
+        and_list(others)
+    )
 }
 
 fn were(names: &[String]) -> &'static str {

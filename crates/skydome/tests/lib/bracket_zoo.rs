@@ -474,6 +474,52 @@ fn cases() -> Vec<Case> {
             "nearly identical",
         ]),
     );
+    // The middle frame from another view (the camera panned half a frame and tilted, its
+    // ground and sky where the bracket has others), at the middle frame's exposure.
+    let mut turned = shots(&[0.0], 9).remove(0);
+    let px = (0..W * H)
+        .flat_map(|p| {
+            let (x, y) = ((p % W + W / 2) % W, (p / W + H / 2) % H);
+            rgb(&turned)[3 * (y * W + x)..3 * (y * W + x) + 3].to_vec()
+        })
+        .collect();
+    turned.pixels = Pixels::U8(px);
+    let mut foreign = jpegs(&base);
+    foreign[1].bytes = encode::jpeg(
+        rgb(&turned),
+        W,
+        H,
+        95,
+        Some(&exif_time(base[1].exposure.time_s)),
+    );
+    case(
+        "one frame from another scene",
+        foreign,
+        None,
+        &d,
+        // Too little of the shortest frame is picture where the stray one is to compare them;
+        // the stray frame and its other neighbour are named together.
+        Verdict::Refused(&[
+            "IMG_0001.jpg and IMG_0002.jpg do not show one scene",
+            "leave out the one that does not belong",
+        ]),
+    );
+    // The same at an end of the exposure order: its neighbour matches the frame beyond.
+    let mut foreign_end = jpegs(&base);
+    foreign_end[2].bytes = encode::jpeg(
+        rgb(&turned),
+        W,
+        H,
+        95,
+        Some(&exif_time(base[2].exposure.time_s)),
+    );
+    case(
+        "the longest frame from another scene",
+        foreign_end,
+        None,
+        &d,
+        Verdict::Refused(&["IMG_0002.jpg does not show the scene of IMG_0001.jpg"]),
+    );
     let mut size = jpegs(&base);
     let small = shots(&[2.0], 1);
     let cropped: Vec<u8> = rgb(&small[0])[..3 * W * (H - 8)].to_vec();
