@@ -105,6 +105,10 @@ pub struct Args {
     /// The response is known to be linear (e.g. RAW-derived TIFF): write a linear profile.
     #[arg(long)]
     pub linear: bool,
+    /// Align hand-held frames by translation (median threshold bitmaps, as `merge --align`)
+    /// before sampling, so calibration samples see one scene point in every frame.
+    #[arg(long)]
+    pub align: bool,
     /// Also solve K times with seeds seed..seed+K−1 and report the spread of g per code.
     #[arg(long, value_name = "K")]
     pub repeat: Option<usize>,
@@ -128,6 +132,7 @@ struct Report<'a> {
     profile: String,
     sampling: Option<&'a skydome::sampling::SampleReport>,
     monotonic_fixes: Option<[usize; 3]>,
+    alignment: Option<skydome::align::Alignment>,
     stability: Option<response::Stability>,
     sweep: Vec<SweepRow>,
     written: Vec<String>,
@@ -144,13 +149,18 @@ struct SweepRow {
 /// The top-level entry point for `skydome calibrate`.
 pub fn run(a: Args, quiet: bool) -> Result<()> {
     io::check_destination(&a.output, &a.images, a.force)?;
-    let br = io::load_bracket(&a.images, &a.bracket, quiet)?;
+    let mut br = io::load_bracket(&a.images, &a.bracket, quiet)?;
+    // The alignment `merge --align` runs, from the library: the same shifts on the same frames.
+    let alignment = a.align.then(|| {
+        skydome::align::align_bracket(&mut br.frames, &skydome::align::AlignOptions::default())
+    });
     let opts = a.calib.options();
     let mut outputs = Outputs::default();
     let mut report = Report {
         profile: a.output.display().to_string(),
         sampling: None,
         monotonic_fixes: None,
+        alignment,
         stability: None,
         sweep: Vec::new(),
         written: Vec::new(),
@@ -234,6 +244,13 @@ fn print_report(r: &Report) {
         crate::out(&format!(
             "codes constrained by data: R {}..{}, G {}..{}, B {}..{} ({} samples added to fill code bands); outside them the curve is extrapolated",
             cr[0][0], cr[0][1], cr[1][0], cr[1][1], cr[2][0], cr[2][1], s.band_samples
+        ));
+    }
+    if let Some(al) = &r.alignment {
+        crate::out(&format!(
+            "aligned: shifts {:?} px (reference frame {})",
+            al.shifts,
+            al.reference + 1
         ));
     }
     if let Some(f) = r.monotonic_fixes {

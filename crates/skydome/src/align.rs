@@ -255,3 +255,15 @@ pub fn apply_shifts(frames: &[Frame], a: &Alignment) -> Vec<Frame> {
         })
         .collect()
 }
+
+/// Aligns a bracket's frames in place: finds the shifts ([`align`]) and moves each frame's
+/// content onto the reference ([`apply_shifts`]). The one alignment step of skydome: what
+/// [`crate::pipeline::run`] does with `align` set (`merge --align`) and what `calibrate --align`
+/// does before sampling, so a hand-held bracket calibrates on the pixels it will be merged on.
+pub fn align_bracket(frames: &mut Vec<Frame>, opts: &AlignOptions) -> Alignment {
+    let a = align(frames, opts);
+    if a.shifts.iter().any(|&s| s != (0, 0)) {
+        *frames = apply_shifts(frames, &a);
+    }
+    a
+}

@@ -22,12 +22,20 @@
 //! The true log-inverse response is `g(z) = ln f⁻¹(max(z, ½) / 255)` ([`Crf::g`]); a recovered
 //! curve equals it up to an additive constant (the gauge), which comparisons remove.
 //!
+//! [`film_scan`] makes a different kind of bracket: a twin of the classic 16-frame film-scan
+//! bracket (pedestal, scan artefact, little above the pedestal in the short frames).
+//!
 //! Everything random is drawn from [`SplitMix64`] with the given seed, so a seed always gives
 //! the same bracket.
 
 use crate::bracket::{Exposure, Frame, Pixels};
 use crate::image::{Circle, HdrImage};
 use crate::sampling::SplitMix64;
+
+mod film_scan;
+pub use film_scan::{
+    film_pedestal, film_scan, FilmScanBracket, FilmScanFrame, FilmScanOptions, FILM_EXPONENT,
+};
 
 /// Errors from the generator.
 #[derive(Debug, thiserror::Error)]

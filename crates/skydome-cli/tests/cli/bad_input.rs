@@ -123,7 +123,13 @@ fn bad_input_gives_one_line_error_exit_1_and_no_output() {
         (
             "missing exposure",
             merge(&["f0.png", "f1.png", "f2.png"], &[]),
-            format!("{}: no exposure time", f("f0.png")),
+            // Every file without a time is named.
+            format!(
+                "{}, {} and {}: no exposure time",
+                f("f0.png"),
+                f("f1.png"),
+                f("f2.png")
+            ),
         ),
         (
             "file does not exist",
@@ -182,7 +188,8 @@ fn bad_input_gives_one_line_error_exit_1_and_no_output() {
                 &["f0.png", "f1.png", "f2.png"],
                 &["--times", "1/25,1/100,1/400"],
             ),
-            "at most pixels although it was exposed longer".into(),
+            // Both pairs the times put in the wrong order are named.
+            "at most pixels although each was exposed longer".into(),
         ),
         (
             "wrong count of times",

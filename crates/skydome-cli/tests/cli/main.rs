@@ -8,6 +8,7 @@ mod common;
 mod bad_input;
 mod batch;
 mod batch_slurm;
+mod calibrate_align;
 mod demo;
 mod flat_field;
 mod pipeline_identity;

@@ -226,5 +226,11 @@ fn ssarcandy_three_column_list_is_read_and_the_ignored_bracket_refused() {
         err.contains("the camera probably ignored the bracket"),
         "{err}"
     );
+    // Every frame that duplicates another is named (four of them carry one exposure), and no
+    // other frame is.
+    for i in 92..=102 {
+        let named = err.contains(&format!("DSC_{i:04}.png"));
+        assert_eq!(named, (97..=100).contains(&i), "DSC_{i:04}.png: {err}");
+    }
     assert!(!out.exists());
 }

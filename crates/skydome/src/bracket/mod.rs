@@ -27,7 +27,7 @@ mod exif;
 pub mod tiff;
 mod times;
 
-pub use checks::assemble;
+pub use checks::{assemble, assemble_with_black_level};
 pub use decode::{check_jpeg_complete, decode};
 pub use exif::{parse_exif_datetime, parse_iso8601, parse_utc_offset, read_metadata, FileMetadata};
 pub use times::{parse_list_file, parse_time, parse_times, times_from_list};
@@ -346,17 +346,20 @@ pub enum BracketError {
     /// Fewer than two frames.
     #[error("a bracket needs at least 2 frames of different exposure, got {0}")]
     TooFewFrames(usize),
+    /// Fewer than two frames left once the frames that add nothing (all black level or all
+    /// clipped) were left out.
+    #[error("{given} frames were given, but {} {} left out because almost every pixel is at the black level or clipped; a bracket needs at least 2 frames that show the scene: retake {} at an exposure that shows the scene", and_list(.left_out), were(.left_out), if .left_out.len() == 1 { "it" } else { "them" })]
+    NothingToMerge {
+        /// Frames given.
+        given: usize,
+        /// The frames left out, in exposure order.
+        left_out: Vec<String>,
+    },
     /// Frames of different sizes.
-    #[error(
-        "{file}: size {w}x{h} differs from {first} ({w0}x{h0}); all frames must have the same size"
-    )]
+    #[error("{}: size differs from {first} ({w0}x{h0}); all frames must have the same size", and_list(&.files.iter().map(|(f, w, h)| format!("{f} ({w}x{h})")).collect::<Vec<_>>()))]
     SizeMismatch {
-        /// Offending file.
-        file: String,
-        /// Its width.
-        w: usize,
-        /// Its height.
-        h: usize,
+        /// Every file whose size differs from the first, with its width and height.
+        files: Vec<(String, usize, usize)>,
         /// The first file.
         first: String,
         /// First width.
@@ -365,22 +368,20 @@ pub enum BracketError {
         h0: usize,
     },
     /// Frames of different bit depths.
-    #[error("{file}: {bits}-bit samples, but {first} has {bits0}-bit; all frames must have the same bit depth")]
+    #[error("{}: bit depth differs from {first} ({bits0}-bit samples); all frames must have the same bit depth", and_list(&.files.iter().map(|(f, b)| format!("{f} ({b}-bit samples)")).collect::<Vec<_>>()))]
     DepthMismatch {
-        /// Offending file.
-        file: String,
-        /// Its depth.
-        bits: u32,
+        /// Every file whose depth differs from the first, with its depth.
+        files: Vec<(String, u32)>,
         /// First file.
         first: String,
         /// First depth.
         bits0: u32,
     },
     /// No exposure time for a file.
-    #[error("{file}: no exposure time in EXIF; supply the exposure times")]
+    #[error("{}: no exposure time in EXIF; supply the exposure times", and_list(.files))]
     MissingExposure {
-        /// File name.
-        file: String,
+        /// Every file without one.
+        files: Vec<String>,
     },
     /// A time that is not a positive finite number of seconds.
     #[error("{file}: invalid exposure time '{value}': expected a positive number of seconds such as 1/400, 0.0025 or 2")]
@@ -437,52 +438,105 @@ pub enum BracketError {
         frames: usize,
     },
     /// Two frames with (almost) the same exposure.
-    #[error("{file}: exposure {e1} is within 1/6 stop of {other} ({e2}); every frame needs a different exposure (auto-ISO on?)")]
+    #[error("{}; every frame needs a different exposure (auto-ISO on?)", .pairs.iter().map(|p| format!("{}: exposure {} is within 1/6 stop of {} ({})", p.file, p.e1, p.other, p.e2)).collect::<Vec<_>>().join("; "))]
     DuplicateExposure {
-        /// File name.
-        file: String,
-        /// Its exposure, formatted.
-        e1: String,
-        /// The other file.
-        other: String,
-        /// Its exposure, formatted.
-        e2: String,
+        /// Every neighbouring pair (in exposure order) closer than 1/6 stop.
+        pairs: Vec<NamedPair>,
     },
     /// Two frames whose pixels are (nearly) identical although metadata says otherwise.
-    #[error("{file}: pixels are nearly identical to {other} although their exposures differ by {stops:.2} stops; the camera probably ignored the bracket (auto-ISO or auto-exposure on)")]
+    #[error("{}: pixels are nearly identical although their exposures differ by up to {stops:.2} stops; the camera probably ignored the bracket (auto-ISO or auto-exposure on): retake them, or keep one of each group", .groups.iter().map(|g| and_list(g)).collect::<Vec<_>>().join("; "))]
     IdenticalPixels {
-        /// File name.
-        file: String,
-        /// The other file.
-        other: String,
-        /// Claimed difference in stops.
+        /// Runs of neighbouring frames (in exposure order) that carry the same picture.
+        groups: Vec<Vec<String>>,
+        /// The largest claimed difference within a group, in stops.
         stops: f64,
+    },
+    /// Frames whose bright and dark parts lie elsewhere than in their neighbours': photos of
+    /// another scene (or another view) given with the bracket.
+    #[error("{}", other_scene(.files, .others))]
+    OtherScene {
+        /// Every frame that does not show its neighbours' scene, in exposure order.
+        files: Vec<String>,
+        /// The frames they were compared with (their neighbours in exposure order).
+        others: Vec<String>,
     },
     /// A frame exposed longer than another is darker at most pixels: the exposure times do not
     /// belong to the photos.
-    #[error("{file} ({e1}) is darker than {other} ({e2}) at most pixels although it was exposed longer: the exposure times do not belong to these photos (swapped or mistyped); check them")]
+    #[error("{} at most pixels although {} exposed longer: the exposure times do not belong to these photos (swapped or mistyped); check them", .pairs.iter().map(|p| format!("{} ({}) is darker than {} ({})", p.file, p.e1, p.other, p.e2)).collect::<Vec<_>>().join("; "), if .pairs.len() == 1 { "it was" } else { "each was" })]
     DarkerWhenLonger {
-        /// The frame exposed longer.
-        file: String,
-        /// Its exposure, formatted.
-        e1: String,
-        /// The frame exposed shorter.
-        other: String,
-        /// Its exposure, formatted.
-        e2: String,
+        /// Every neighbouring pair (in exposure order) whose longer frame (`file`) is darker.
+        pairs: Vec<NamedPair>,
     },
     /// EXIF orientations disagree.
-    #[error("{file}: EXIF orientation {o} differs from {first} ({o0}); ignore EXIF orientation (keep the stored pixel order) to merge them")]
+    #[error("{}: EXIF orientation differs from {first} ({o0}); ignore EXIF orientation (keep the stored pixel order) to merge them", and_list(&.files.iter().map(|(f, o)| format!("{f} (orientation {o})")).collect::<Vec<_>>()))]
     OrientationMismatch {
-        /// File name.
-        file: String,
-        /// Its orientation.
-        o: u16,
+        /// Every file whose orientation differs from the first, with its orientation.
+        files: Vec<(String, u16)>,
         /// First file.
         first: String,
         /// First orientation.
         o0: u16,
     },
+}
+
+/// Two frames of a bracket named in a refusal, with their exposures as the message shows them:
+/// `file` is the one exposed longer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedPair {
+    /// The frame exposed longer (or, for equal exposures, the later in exposure order).
+    pub file: String,
+    /// Its exposure, formatted.
+    pub e1: String,
+    /// The other frame.
+    pub other: String,
+    /// Its exposure, formatted.
+    pub e2: String,
+}
+
+/// `a`, `a and b`, `a, b and c`: file names for a message.
+fn and_list<S: AsRef<str>>(names: &[S]) -> String {
+    match names {
+        [] => String::new(),
+        [one] => one.as_ref().to_string(),
+        [rest @ .., last] => format!(
+            "{} and {}",
+            rest.iter()
+                .map(AsRef::as_ref)
+                .collect::<Vec<_>>()
+                .join(", "),
+            last.as_ref()
+        ),
+    }
+}
+
+/// The sentence of [`BracketError::OtherScene`].
+fn other_scene(files: &[String], others: &[String]) -> String {
+    let one = files.len() == 1;
+    let (it, its) = if one {
+        ("it", "its")
+    } else {
+        ("them", "their")
+    };
+    if others.is_empty() {
+        return format!(
+            "{} do not show one scene: their bright and dark parts lie in different places (a photo of another scene or another view in the bracket); leave out the one that does not belong, or retake it",
+            and_list(files)
+        );
+    }
+    format!(
+        "{} {} not show the scene of {}: {its} bright and dark parts lie elsewhere (a photo of another scene or another view in the bracket); leave {it} out or retake {it}",
+        and_list(files),
+        if one { "does" } else { "do" },
+        and_list(others)
+    )
+}
+
+fn were(names: &[String]) -> &'static str {
+    if names.len() == 1 {
+        "was"
+    } else {
+        "were"
+    }
 }
 
 /// A 16-bit code → one of 256 levels, `round(v / 257)` (so `257 · z` maps to `z` exactly).
@@ -671,7 +725,17 @@ mod tests {
         let d1 = frame("d1", 64, 64, |_| 0, 1.0 / 4096.0);
         let d2 = frame("d2", 64, 64, |_| 0, 1.0 / 8192.0);
         let e = assemble(vec![a, d1, d2], None, OrientationPolicy::Apply).unwrap_err();
-        assert_eq!(e, BracketError::TooFewFrames(1));
+        assert_eq!(
+            e,
+            BracketError::NothingToMerge {
+                given: 3,
+                left_out: vec!["d2".into(), "d1".into()]
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "3 frames were given, but d2 and d1 were left out because almost every pixel is at the black level or clipped; a bracket needs at least 2 frames that show the scene: retake them at an exposure that shows the scene"
+        );
     }
 
     #[test]

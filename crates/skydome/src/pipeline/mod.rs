@@ -123,7 +123,7 @@ pub fn run(
 ) -> Result<Dome, PipelineError> {
     let mut progress = Reporter(progress);
     check_options(options)?;
-    let mut br = read_bracket(input, &mut progress)?;
+    let mut br = read_bracket(input, options.black_level, &mut progress)?;
     let alignment = options.align.then(|| align_frames(&mut br));
     let lens = lens_stage(&options.lens, &br, &mut progress)?;
     let lens_circle = lens.as_ref().map(|(l, _)| l.circle);
@@ -214,11 +214,10 @@ pub fn run(
     })
 }
 
-/// Aligns hand-held frames by translation (see [`crate::align`]).
+/// Aligns hand-held frames by translation (see [`crate::align`]): the same step
+/// `calibrate --align` runs.
 fn align_frames(br: &mut Bracket) -> Alignment {
-    let a = align::align(&br.frames, &AlignOptions::default());
-    br.frames = align::apply_shifts(&br.frames, &a);
-    a
+    align::align_bracket(&mut br.frames, &AlignOptions::default())
 }
 
 /// What the response stage found.
@@ -545,16 +544,27 @@ pub fn load_bracket(
     input: Input,
     progress: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Bracket, PipelineError> {
-    read_bracket(input, &mut Reporter(progress))
+    read_bracket(input, 0, &mut Reporter(progress))
 }
 
-fn read_bracket(input: Input, p: &mut Reporter<'_>) -> Result<Bracket, PipelineError> {
+/// Decodes and assembles the bracket; `black_level` is [`Options::black_level`] (0 = not
+/// known), which the bracket's checks honour.
+fn read_bracket(
+    input: Input,
+    black_level: u8,
+    p: &mut Reporter<'_>,
+) -> Result<Bracket, PipelineError> {
     p.at(Stage::Decoding, 0.0)?;
     let decoded = match input.frames {
         Frames::Decoded(d) => d,
         Frames::Encoded(e) => decode_all(&e, &input.decode, p)?,
     };
-    let br = bracket::assemble(decoded, input.times.as_deref(), input.orientation)?;
+    let br = bracket::assemble_with_black_level(
+        decoded,
+        input.times.as_deref(),
+        input.orientation,
+        black_level,
+    )?;
     p.at(Stage::Decoding, 1.0)?;
     Ok(br)
 }
@@ -666,7 +676,7 @@ pub fn detect_lens_circle(input: Input) -> Result<(CircleFit, RgbImage<u8>), Pip
         Frames::Decoded(d) if d.len() == 1 => d,
         frames => {
             let input = Input { frames, ..input };
-            let br = read_bracket(input, &mut Reporter(&mut no_progress))?;
+            let br = read_bracket(input, 0, &mut Reporter(&mut no_progress))?;
             return detect_circle_in(&br.frames);
         }
     };

@@ -5,18 +5,26 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+#[path = "../common/encode.rs"]
+mod encode;
 #[path = "../fisheye_support/mod.rs"]
 mod fisheye_support;
+/// The fuzz targets' functions, replayed on their corpora by `fuzz_corpus`.
+#[path = "../../../../fuzz/src/lib.rs"]
+mod fuzz_targets;
 
 mod align;
 mod bracket_real;
+mod bracket_zoo;
 mod calibration;
 mod curve_range;
 mod exif_stations;
+mod film_scan;
 mod fisheye;
 mod fisheye_overlay;
 mod formats_exr;
 mod formats_rgbe;
+mod fuzz_corpus;
 mod independent_readers;
 mod merge;
 mod noise_merge;
