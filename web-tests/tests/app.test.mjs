@@ -171,7 +171,7 @@ test('fish-eye path: tapped sun and compass north give the CLI\'s #SUN and #NORT
     assert.equal(msg, null, `no error: ${msg}`);
     const tap = await p.page.evaluate(() => document.body.dataset.tap);
     assert.match(tap, /^[\d.]+,[\d.]+$/);
-    assert.match(await p.page.textContent('#facts'), /tap:/);
+    assert.match(await p.page.textContent('#facts'), /where you tapped/);
     await screenshot(p.page, '7-result-sun-tapped');
     const hdr = await download(p.page, '#save-hdr');
 
