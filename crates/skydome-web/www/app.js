@@ -51,7 +51,7 @@ function showInfo(text) {
   m.hidden = false;
 }
 
-function clearMessage() { $('message').hidden = true; }
+function clearMessage() { $('message').hidden = true; $('no-circle').hidden = true; }
 
 function show(name) {
   for (const s of screens) $(`screen-${s}`).hidden = s !== name;
@@ -283,6 +283,7 @@ function offerNoCircle(times, optionExtras) {
   $('no-circle-drag').hidden = !circlePhoto;
   $('no-circle-plain').onclick = () => { box.hidden = true; mergeAgain(times, { ...optionExtras, plain: true }); };
   $('no-circle-drag').onclick = () => { box.hidden = true; editCircle(times, optionExtras); };
+  box.scrollIntoView({ block: 'nearest' });
 }
 
 /** The circle editor: the photo with a circle to drag (centre) and size (slider), in the
