@@ -104,13 +104,13 @@ try {
   const core = await p.page.evaluate(() => window.__skydomeCoreMs);
   const stages = await p.page.evaluate(() => window.__skydomeStageMs);
   const wasm = await p.page.evaluate(() => window.__skydomeAsk('memory'));
-  const core = await p.page.evaluate(() => window.__skydomeCore);
+  const coreInfo = await p.page.evaluate(() => window.__skydomeCore);
   // The .wasm the page loaded.
-  const wasmFile = path.join(appDir, core && core.build === 'threaded' ? 'pkg-mt' : 'pkg', 'skydome_web_bg.wasm');
+  const wasmFile = path.join(appDir, coreInfo && coreInfo.build === 'threaded' ? 'pkg-mt' : 'pkg', 'skydome_web_bg.wasm');
   const gz = gzipSync(readFileSync(wasmFile), { level: 9 }).length;
   const raw = readFileSync(wasmFile).length;
   const result = {
-    core,
+    core: coreInfo,
     frames: frames.length,
     megapixels_each: (size * size) / 1e6,
     browser_core_s: core / 1000,
