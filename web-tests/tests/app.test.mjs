@@ -287,17 +287,21 @@ test('a broken photo gives the command line\'s error as one sentence naming the 
   const b = path.join(dir, 'sky_b.jpg');
   writeFileSync(a, Buffer.from([0xff, 0xd8, 0xff, 0xe0, 0, 16, 1, 2, 3]));
   writeFileSync(b, readFileSync(path.join(root, 'demo', 'frame_0.jpg')));
+  // Their exposure times come with them (photos without EXIF times get the times form
+  // otherwise, before anything is decoded; newuser.test.mjs).
+  const list = path.join(dir, 'times.txt');
+  writeFileSync(list, 'sky_a.jpg 1/250\nsky_b.jpg 1/60\n');
   const p = await phone(server.origin);
   try {
     await openApp(p);
     // First and second: with a decoding worker (two cores or more) the second photo is its.
     for (const names of [['sky_a.jpg', 'sky_b.jpg'], ['sky_b.jpg', 'sky_a.jpg']]) {
-      const since = await pickFiles(p.page, names.map((n) => path.join(dir, n)));
+      const since = await pickFiles(p.page, [...names.map((n) => path.join(dir, n)), list]);
       const msg = await resultOrError(p.page, since);
       oneSentence(msg);
       assert.match(msg, /sky_a\.jpg/);
       // The core's message, as `skydome merge` prints it (`error: ` and the full stop aside).
-      const line = cliError(['merge', ...names, '-o', 'out.hdr'], dir).replace(/^error: /, '');
+      const line = cliError(['merge', ...names, '--times-file', 'times.txt', '-o', 'out.hdr'], dir).replace(/^error: /, '');
       assert.equal(msg.replace(/\.$/, ''), line.replace(/\.$/, ''));
     }
     await screenshot(p.page, '8-error');
