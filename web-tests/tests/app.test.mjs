@@ -58,6 +58,10 @@ test('capture path: three exposures requested and read back, the core refuses id
     // The fake camera's photos are identical whatever the exposure: the core refuses them.
     oneSentence(msg);
     assert.match(msg, /identical/i, msg);
+    // Named as the user knows them, the honoured times not blamed, the way out named.
+    assert.match(msg, /^Photo \d of 3 came out nearly identical to photo \d of 3/, msg);
+    assert.ok(!/shot_|auto-exposure|auto-ISO/.test(msg), msg);
+    assert.match(msg, /Pick photos/, msg);
     assert.equal(await p.page.evaluate(() => document.body.dataset.screen), 'camera');
     await screenshot(p.page, '2-capture-refused');
     assertStayedHome(p);

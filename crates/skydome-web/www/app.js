@@ -228,9 +228,9 @@ function startWork(title, text) {
  *  camera reported the times asked for, so its exposure setting is not to blame. */
 function capturedRefusal(err) {
   const text = String(err && err.message ? err.message : err);
-  const m = text.match(/^(photo \d+ of \d+)\.jpg: pixels are nearly identical to (photo \d+ of \d+)\.jpg/);
+  const m = text.match(/^(photo \d+ of \d+)\.jpg: pixels are nearly identical to (photo \d+ of \d+)\.jpg/i);
   if (!m) return err;
-  return new Sentence(`${m[1][0].toUpperCase()}${m[1].slice(1)} came out nearly identical to ${m[2]} although the camera reported the exposure times asked for, so this browser cannot bracket with it: take the bracket with the camera app and merge it with Pick photos.`);
+  return new Sentence(`P${m[1].slice(1)} came out nearly identical to ${m[2]} although the camera reported the exposure times asked for, so this browser cannot bracket with it: take the bracket with the camera app and merge it with Pick photos.`);
 }
 
 async function merge(frames, times, optionExtras = {}, { honoured = false } = {}) {
