@@ -3,7 +3,10 @@
 // preview, the tab's peak memory (renderer process resident set, sampled every 100 ms; the
 // worker runs in the same process), the wasm linear memory's high-water mark, and the native
 // CLI's time for the same frames and options. Also the gzipped .wasm size.
-//   node measure.mjs [--size 3464] [--out results.json]
+//   node measure.mjs [--size 3464] [--threads N] [--out results.json]
+// --threads N loads the page with ?threads=N: the threaded core with a pool of N workers (the
+// page is cross-origin isolated by `skydome serve`), 0 the single-threaded core; without it the
+// app picks (one thread per core).
 // Speed is measured here, never asserted in tests.
 import { execFileSync } from 'node:child_process';
 import { existsSync, readFileSync, readdirSync, writeFileSync } from 'node:fs';
@@ -20,6 +23,7 @@ const arg = (name, dflt) => {
 };
 const size = Number(arg('--size', '3464')); // 3464² = 12.0 MP
 const outFile = arg('--out', null);
+const threads = arg('--threads', null);
 
 /** Memory of this test's Chromium renderer processes (command lines carry the fresh profile's
  *  folder, so other Chromium instances on the machine are not counted): for each, the resident
@@ -78,8 +82,9 @@ try {
   await p.page.addInitScript(() => {
     navigator.mediaDevices.getUserMedia = () => Promise.reject(new DOMException('measuring without a camera', 'NotAllowedError'));
   });
-  await p.page.goto(`${server.origin}/`);
+  await p.page.goto(`${server.origin}/${threads != null ? `?threads=${threads}` : ''}`);
   await onScreen(p.page, 'camera');
+  await p.page.waitForFunction(() => document.body.dataset.core);
   await setSettings(p.page, { fisheye: true, sun: 'auto', north: '0', equirect: false });
   await p.page.waitForTimeout(1000);
   sample(p.profile);
@@ -99,9 +104,13 @@ try {
   const core = await p.page.evaluate(() => window.__skydomeCoreMs);
   const stages = await p.page.evaluate(() => window.__skydomeStageMs);
   const wasm = await p.page.evaluate(() => window.__skydomeAsk('memory'));
-  const gz = gzipSync(readFileSync(path.join(appDir, 'pkg/skydome_web_bg.wasm')), { level: 9 }).length;
-  const raw = readFileSync(path.join(appDir, 'pkg/skydome_web_bg.wasm')).length;
+  const coreInfo = await p.page.evaluate(() => window.__skydomeCore);
+  // The .wasm the page loaded.
+  const wasmFile = path.join(appDir, coreInfo && coreInfo.build === 'threaded' ? 'pkg-mt' : 'pkg', 'skydome_web_bg.wasm');
+  const gz = gzipSync(readFileSync(wasmFile), { level: 9 }).length;
+  const raw = readFileSync(wasmFile).length;
   const result = {
+    core: coreInfo,
     frames: frames.length,
     megapixels_each: (size * size) / 1e6,
     browser_core_s: core / 1000,

@@ -44,13 +44,16 @@ export function tempDir(name) {
   return mkdtempSync(path.join(tmpdir(), `skydome-web-${name}-`));
 }
 
-/** Starts `skydome serve` of `dir` (the built app) on a free port; resolves to {origin, stop}. */
-export async function serve(dir = appDir) {
+/** Starts `skydome serve` of `dir` (the built app) on a free port; resolves to {origin, stop}.
+ *  `isolation: false` serves without the COOP/COEP headers (`--no-isolation`), as a host that
+ *  cannot set headers. */
+export async function serve(dir = appDir, { isolation = true } = {}) {
   if (!existsSync(path.join(dir, 'index.html'))) {
     throw new Error(`${dir}: the app is not built; run crates/skydome-web/build.sh`);
   }
   const port = 18000 + Math.floor(Math.random() * 2000);
-  const proc = spawn(skydomeBin(), ['serve', '--addr', `127.0.0.1:${port}`, '--dir', dir], {
+  const args = ['serve', '--addr', `127.0.0.1:${port}`, '--dir', dir, ...(isolation ? [] : ['--no-isolation'])];
+  const proc = spawn(skydomeBin(), args, {
     stdio: ['ignore', 'pipe', 'pipe'],
   });
   await new Promise((resolve, reject) => {
@@ -72,22 +75,23 @@ export const CHROMIUM_FLAGS = [
   '--use-fake-device-for-media-stream', '--use-fake-ui-for-media-stream',
 ];
 
-/** A phone: Chromium with a fresh profile, 412 × 915 CSS px portrait, touch, the camera
- *  allowed. Every request is recorded in `requests`. */
-export async function phone(origin, { downloads = true } = {}) {
+/** A phone: Chromium with a fresh profile, 412 × 915 CSS px portrait (or `viewport`), touch,
+ *  the camera allowed, service workers allowed (`serviceWorkers: 'block'` blocks them). Every
+ *  request is recorded in `requests`. */
+export async function phone(origin, { downloads = true, viewport = { width: 412, height: 915 }, serviceWorkers = 'allow' } = {}) {
   const profile = tempDir('profile');
   const context = await chromium.launchPersistentContext(profile, {
     executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
     headless: true,
     args: CHROMIUM_FLAGS,
-    viewport: { width: 412, height: 915 },
+    viewport,
     deviceScaleFactor: 2,
     isMobile: true,
     hasTouch: true,
     acceptDownloads: downloads,
     // The orientation sensors need these for deviceorientationabsolute events to carry values.
     permissions: ['camera', 'accelerometer', 'gyroscope', 'magnetometer'],
-    serviceWorkers: 'allow',
+    serviceWorkers,
   });
   const requests = [];
   context.on('request', (r) => requests.push(r.url()));

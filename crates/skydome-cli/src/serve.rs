@@ -22,7 +22,18 @@ pub struct Args {
     /// The built app (the folder `crates/skydome-web/build.sh` writes).
     #[arg(long, default_value = "target/skydome-web/app")]
     pub dir: PathBuf,
+    /// Send no cross-origin isolation headers (COOP/COEP), as a static host that cannot set
+    /// headers does: the app then runs its single-threaded core (or its service worker adds the
+    /// headers after the first visit; see docs/phone.md).
+    #[arg(long)]
+    pub no_isolation: bool,
 }
+
+/// The headers that make the page cross-origin isolated (`crossOriginIsolated` true,
+/// `SharedArrayBuffer` available), which the app's threaded core needs: sent with every
+/// response, as they must reach the page, its workers and the `.wasm` alike.
+pub const ISOLATION_HEADERS: &str = "Cross-Origin-Opener-Policy: same-origin\r\n\
+     Cross-Origin-Embedder-Policy: require-corp\r\nCross-Origin-Resource-Policy: same-origin\r\n";
 
 /// The longest request head read (request line and headers); a browser's is under 2 KiB.
 const MAX_HEAD: usize = 16 * 1024;
@@ -51,12 +62,13 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         "serving {} at http://{shown}/ (Ctrl-C stops)",
         a.dir.display()
     ));
-    serve_on(&listener, &a.dir, quiet);
+    serve_on(&listener, &a.dir, !a.no_isolation, quiet);
     Ok(())
 }
 
-/// Answers connections on `listener` with files from `dir`, each on its own thread, forever.
-fn serve_on(listener: &TcpListener, dir: &Path, quiet: bool) {
+/// Answers connections on `listener` with files from `dir`, each on its own thread, forever;
+/// with [`ISOLATION_HEADERS`] when `isolate`.
+fn serve_on(listener: &TcpListener, dir: &Path, isolate: bool, quiet: bool) {
     for stream in listener.incoming() {
         let stream = match stream {
             Ok(s) => s,
@@ -67,7 +79,7 @@ fn serve_on(listener: &TcpListener, dir: &Path, quiet: bool) {
         };
         let dir = dir.to_path_buf();
         std::thread::spawn(move || {
-            if let Err(e) = answer(&dir, stream) {
+            if let Err(e) = answer(&dir, stream, isolate) {
                 crate::io::warn(quiet, &format!("cannot answer a request: {e}"));
             }
         });
@@ -77,7 +89,7 @@ fn serve_on(listener: &TcpListener, dir: &Path, quiet: bool) {
 /// Reads one request from `stream` and writes its response, then closes the connection.
 /// A client that connects and sends nothing (a browser's speculative connection) is dropped
 /// after the read timeout.
-fn answer(dir: &Path, mut stream: TcpStream) -> std::io::Result<()> {
+fn answer(dir: &Path, mut stream: TcpStream, isolate: bool) -> std::io::Result<()> {
     stream.set_read_timeout(Some(Duration::from_secs(30)))?;
     stream.set_write_timeout(Some(Duration::from_secs(60)))?;
     let mut head = Vec::with_capacity(2048);
@@ -102,12 +114,12 @@ fn answer(dir: &Path, mut stream: TcpStream) -> std::io::Result<()> {
             Ok(httparse::Status::Partial) if head.len() < MAX_HEAD => {}
             _ => {
                 let (status, body) = text(400, "bad request");
-                return write_response(&mut stream, status, body, true);
+                return write_response(&mut stream, status, body, true, isolate);
             }
         }
     };
     let (status, body) = respond(dir, &method, &url);
-    write_response(&mut stream, status, body, method != "HEAD")
+    write_response(&mut stream, status, body, method != "HEAD", isolate)
 }
 
 fn is_timeout(e: &std::io::Error) -> bool {
@@ -125,6 +137,7 @@ fn write_response(
     status: u16,
     (content_type, bytes): (&'static str, Vec<u8>),
     with_body: bool,
+    isolate: bool,
 ) -> std::io::Result<()> {
     let reason = match status {
         200 => "OK",
@@ -136,8 +149,9 @@ fn write_response(
     // The service worker does the caching; the server always sends the current file.
     let head = format!(
         "HTTP/1.1 {status} {reason}\r\nContent-Type: {content_type}\r\nContent-Length: {}\r\n\
-         Cache-Control: no-cache\r\nConnection: close\r\n\r\n",
-        bytes.len()
+         Cache-Control: no-cache\r\nConnection: close\r\n{}\r\n",
+        bytes.len(),
+        if isolate { ISOLATION_HEADERS } else { "" }
     );
     stream.write_all(head.as_bytes())?;
     if with_body {
@@ -227,7 +241,7 @@ mod tests {
         let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
         let addr = listener.local_addr().expect("addr");
         let d = dir.path().to_path_buf();
-        std::thread::spawn(move || serve_on(&listener, &d, true));
+        std::thread::spawn(move || serve_on(&listener, &d, true, true));
         // A browser opens connections it may never use; they must not block the others.
         let idle: Vec<TcpStream> = (0..12)
             .map(|_| TcpStream::connect(addr).expect("connect"))
@@ -243,6 +257,12 @@ mod tests {
                 "{r}"
             );
             assert!(r.contains("Connection: close\r\n"), "{r}");
+            // Cross-origin isolated, for the threaded core (and on every response).
+            assert!(
+                r.contains("Cross-Origin-Opener-Policy: same-origin\r\n")
+                    && r.contains("Cross-Origin-Embedder-Policy: require-corp\r\n"),
+                "{r}"
+            );
             assert!(r.ends_with("\r\n\r\n<!doctype html>"), "{r}");
         }
         let head = get(addr, "HEAD /index.html HTTP/1.1\r\nHost: x\r\n\r\n");
@@ -260,6 +280,15 @@ mod tests {
         let junk = get(addr, "\x01\x02 nonsense\r\n\r\n");
         assert!(junk.starts_with("HTTP/1.1 400 "), "{junk}");
         drop(idle);
+
+        // --no-isolation: the same files without the headers.
+        let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+        let addr = listener.local_addr().expect("addr");
+        let d = dir.path().to_path_buf();
+        std::thread::spawn(move || serve_on(&listener, &d, false, true));
+        let r = get(addr, "GET / HTTP/1.1\r\nHost: x\r\n\r\n");
+        assert!(r.starts_with("HTTP/1.1 200 OK\r\n"), "{r}");
+        assert!(!r.contains("Cross-Origin-"), "{r}");
     }
 
     #[test]

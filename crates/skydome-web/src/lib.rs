@@ -30,6 +30,26 @@ use skydome::pipeline::{
 use skydome::sky::{DevicePose, ImageOrientation, SkyGeometry};
 use wasm_bindgen::prelude::*;
 
+/// The threaded build's pool (feature `threads`): `initThreadPool(n)` starts `n` Web Workers
+/// that run the library's rayon parallelism; call it once per module, from a worker (rayon
+/// busy-waits, which would block the page's main thread), before the first run.
+#[cfg(feature = "threads")]
+pub use wasm_bindgen_rayon::init_thread_pool;
+
+/// How many threads the core computes on: rayon's pool in the threaded build, 1 in the
+/// single-threaded one.
+#[wasm_bindgen]
+pub fn core_threads() -> usize {
+    #[cfg(feature = "threads")]
+    {
+        rayon::current_num_threads()
+    }
+    #[cfg(not(feature = "threads"))]
+    {
+        1
+    }
+}
+
 /// An error of the web surface, shown to the user as one sentence ([`sentence`]).
 #[derive(Debug)]
 pub enum WebError {
@@ -49,9 +69,16 @@ impl std::fmt::Display for WebError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             WebError::Pipeline(PipelineError::Cancelled) => f.write_str("cancelled"),
-            WebError::Pipeline(e) => write!(f, "{e}"),
+            // The library's message tells a command-line user to give the circle; on the phone
+            // the way out is a button (see `kind`).
+            WebError::Pipeline(PipelineError::CircleNotFound { frame, .. }) => write!(
+                f,
+                "{frame}: no fish-eye picture circle was found in these photos; if they were taken \
+                 without a fish-eye lens, merge them as ordinary photos, else drag the circle into place"
+            ),
+            WebError::Pipeline(e) => write!(f, "{}", in_app_words(&e.to_string())),
             WebError::Options(e) => write!(f, "the app's options are not valid ({e})"),
-            WebError::Profile(e) => write!(f, "{e}"),
+            WebError::Profile(e) => write!(f, "{}", in_app_words(e)),
             WebError::Missing(what) => write!(f, "{what} was not made in this run"),
             WebError::Encode(e) => write!(f, "cannot encode the file: {e}"),
         }
@@ -87,6 +114,45 @@ pub fn sentence(message: &str) -> String {
 #[wasm_bindgen(js_name = sentence)]
 pub fn sentence_js(message: &str) -> String {
     sentence(message)
+}
+
+impl WebError {
+    /// What kind of failure this is, for the page to offer the way out (a button) beside the
+    /// sentence: `no-circle` (no fish-eye circle found: merge as ordinary photos, or give the
+    /// circle), `missing-times` (a photo without an exposure time: type them), `cancelled`, or
+    /// `error`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            WebError::Pipeline(PipelineError::CircleNotFound { .. }) => "no-circle",
+            WebError::Pipeline(PipelineError::Bracket(
+                skydome::bracket::BracketError::MissingExposure { .. },
+            )) => "missing-times",
+            WebError::Pipeline(PipelineError::Cancelled) => "cancelled",
+            _ => "error",
+        }
+    }
+
+    /// The error for the page: a JavaScript `Error` whose message is [`sentence`] and whose
+    /// `name` is [`WebError::kind`].
+    fn to_js(&self) -> JsValue {
+        let e = js_sys::Error::new(&sentence(&self.to_string()));
+        e.set_name(self.kind());
+        e.into()
+    }
+}
+
+/// A profile message in the app's words: the command-line advice (`skydome calibrate`,
+/// `skydome lens`) becomes what to do in the app.
+fn in_app_words(message: &str) -> String {
+    message
+        .replace(
+            " (re-create it with `skydome calibrate`)",
+            "; delete it in Settings and merge a bracket with “Calibrate the camera again” on",
+        )
+        .replace(
+            "; fix the file or regenerate it with `skydome lens`",
+            "; delete it in Settings, and the next bracket finds the lens circle again",
+        )
 }
 
 impl From<WebError> for JsError {
@@ -203,6 +269,18 @@ fn run_photos(
     options: &Options,
     progress: &mut dyn FnMut(Stage, f64) -> bool,
 ) -> Result<Dome, WebError> {
+    // None decoded yet: the pipeline decodes them itself, a few at once on the threaded core
+    // (its own `decode_all`, the same decoder as below).
+    if frames.iter().all(|f| matches!(f, Photo::Encoded(_))) {
+        let encoded = frames
+            .into_iter()
+            .filter_map(|f| match f {
+                Photo::Encoded(e) => Some(e),
+                Photo::Decoded(_) => None,
+            })
+            .collect();
+        return run_input(Frames::Encoded(encoded), times, options, progress);
+    }
     let n = frames.len();
     let mut decoded = Vec::with_capacity(n);
     for (i, f) in frames.into_iter().enumerate() {
@@ -419,13 +497,15 @@ impl Job {
     /// called between steps with a [`StageProgress`] as JSON (`{stage, fraction, overall}`);
     /// returning `true` cancels. The photos go to the run (decoded ones take 3 bytes a pixel),
     /// so a second run needs a new job.
+    ///
+    /// Errors are JavaScript `Error`s named by their [`WebError::kind`].
     pub fn run(
         &mut self,
         options_json: &str,
         times: Vec<f64>,
         progress: &js_sys::Function,
-    ) -> Result<Outcome, JsError> {
-        let options = parse_options(options_json)?;
+    ) -> Result<Outcome, JsValue> {
+        let options = parse_options(options_json).map_err(|e| e.to_js())?;
         let times = (!times.is_empty()).then_some(times);
         let mut cb = |stage: Stage, fraction: f64| {
             let event = StageProgress::new(stage, fraction).to_json();
@@ -434,7 +514,8 @@ impl Job {
                 .map(|v| v.is_truthy())
                 .unwrap_or(false)
         };
-        let dome = run_photos(std::mem::take(&mut self.frames), times, &options, &mut cb)?;
+        let dome = run_photos(std::mem::take(&mut self.frames), times, &options, &mut cb)
+            .map_err(|e| e.to_js())?;
         Ok(Outcome { dome })
     }
 }
@@ -519,8 +600,93 @@ impl Outcome {
     }
 }
 
+/// The dome's luminance over the sky (inside the 180° horizon when there is one), for the result
+/// screen: cd/m² on an absolute dome (a meter reading was given), relative units otherwise.
+/// Luminance is the library's (Rec. 709 weights of linear radiance, × 179 lm/W when
+/// absolute, as Radiance's tools read it).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LuminanceSummary {
+    /// True when the values are cd/m².
+    pub absolute: bool,
+    /// Smallest positive luminance.
+    pub min: f64,
+    /// 1st percentile.
+    pub p1: f64,
+    /// Median.
+    pub median: f64,
+    /// 99.9th percentile.
+    pub p999: f64,
+    /// Largest luminance (the sun when it is in the picture).
+    pub max: f64,
+}
+
+impl Outcome {
+    /// The circle the sky's figures are taken over: the 180° horizon in the output picture, when
+    /// the run had a fish-eye lens.
+    fn sky_mask(&self) -> Option<Circle> {
+        self.dome.marks.as_ref().and_then(|m| m.horizon)
+    }
+
+    /// cd/m² per unit of the radiance map, when it is absolute.
+    fn cd_per_unit(&self) -> Option<f64> {
+        self.dome
+            .meta
+            .is_absolute()
+            .then_some(skydome::image::RADIANCE_EFFICACY)
+    }
+
+    /// The sky's luminance range ([`LuminanceSummary`]).
+    pub fn luminance_summary(&self) -> Result<LuminanceSummary, WebError> {
+        let stats =
+            skydome::tonemap::luminance_stats(&self.dome.radiance, self.sky_mask().as_ref())
+                .map_err(|e| WebError::Encode(e.to_string()))?;
+        let k = self.cd_per_unit().unwrap_or(1.0);
+        Ok(LuminanceSummary {
+            absolute: self.cd_per_unit().is_some(),
+            min: stats.min * k,
+            p1: stats.percentile(1.0) * k,
+            median: stats.percentile(50.0) * k,
+            p999: stats.percentile(99.9) * k,
+            max: stats.max * k,
+        })
+    }
+
+    /// The false-colour view of log luminance (the library's [`skydome::plot::false_colour`], as
+    /// `skydome falsecolor` draws it): cd/m² on an absolute dome, with its labelled colour bar
+    /// on the right, as JPEG.
+    pub fn false_colour_bytes(&self) -> Result<Vec<u8>, WebError> {
+        let pic = skydome::plot::false_colour(
+            &self.dome.radiance,
+            &skydome::plot::FalseColour {
+                mask: self.sky_mask(),
+                scale: self.cd_per_unit(),
+                ..skydome::plot::FalseColour::default()
+            },
+        )
+        .map_err(|e| WebError::Encode(e.to_string()))?;
+        encode_rgb8(
+            &pic,
+            PictureFormat::Jpeg {
+                quality: DEFAULT_JPEG_QUALITY,
+            },
+        )
+        .map_err(|e| WebError::Encode(e.to_string()))
+    }
+}
+
 #[wasm_bindgen]
 impl Outcome {
+    /// The sky's luminance range as JSON ([`LuminanceSummary`]).
+    pub fn luminance_json(&self) -> Result<String, JsError> {
+        let s = self.luminance_summary()?;
+        Ok(serde_json::to_string(&s).map_err(|e| WebError::Encode(e.to_string()))?)
+    }
+
+    /// The false-colour view as JPEG ([`Outcome::false_colour_bytes`]).
+    pub fn false_colour_jpeg(&self) -> Result<Vec<u8>, JsError> {
+        Ok(self.false_colour_bytes()?)
+    }
+
     /// The pipeline's report as JSON (frames, response, warnings, geometry, header metadata).
     pub fn report_json(&self) -> String {
         serde_json::to_string(&self.dome.report).unwrap_or_else(|_| "{}".to_string())
@@ -587,8 +753,14 @@ impl Outcome {
 /// message) and returns it re-serialised; the error names the file and what is wrong.
 #[wasm_bindgen]
 pub fn check_camera_profile(name: &str, json: &str) -> Result<String, JsError> {
+    check_camera_profile_text(name, json).map_err(|m| JsError::new(&m))
+}
+
+/// [`check_camera_profile`]'s check, its refusal as the sentence the page shows.
+pub fn check_camera_profile_text(name: &str, json: &str) -> Result<String, String> {
     let refused = |e: &dyn std::fmt::Display| {
-        WebError::Profile(format!("{name}: not a usable camera profile: {e}"))
+        let e = WebError::Profile(format!("{name}: not a usable camera profile: {e}"));
+        sentence(&e.to_string())
     };
     let p = CameraProfile::from_json(json).map_err(|e| refused(&e))?;
     p.response().map_err(|e| refused(&e))?;
@@ -691,6 +863,21 @@ pub fn photo_exposure(name: String, bytes: Vec<u8>) -> Result<String, JsError> {
         "height": d.height,
     });
     Ok(v.to_string())
+}
+
+/// What a photo's EXIF says, read without decoding its pixels
+/// ([`skydome::bracket::read_metadata`]), as JSON `{exposure_time_s, make, model}` (unknown
+/// fields null): the page pre-fills the exposure-time field of each picked photo with it, and
+/// names the camera a calibration's profile is stored under.
+#[wasm_bindgen]
+pub fn photo_metadata(bytes: Vec<u8>) -> String {
+    let m = skydome::bracket::read_metadata(&bytes);
+    serde_json::json!({
+        "exposure_time_s": m.exposure_time_s,
+        "make": m.info.make,
+        "model": m.info.model,
+    })
+    .to_string()
 }
 
 /// Exposure times for photos without EXIF from a list file in the command line's
@@ -836,6 +1023,78 @@ mod tests {
         assert!(seen.windows(2).all(|w| w[0] <= w[1]), "{seen:?}");
         seen.dedup();
         assert_eq!(seen, (0..STAGES.len()).collect::<Vec<_>>());
+    }
+
+    /// The phone's words for what the command line words for a command-line user, and the
+    /// kind the page offers a way out for.
+    #[test]
+    fn no_circle_and_bad_profiles_say_what_to_do_in_the_app() {
+        let e = WebError::Pipeline(PipelineError::CircleNotFound {
+            frame: "IMG_1.jpg".into(),
+            reason: "no lens circle found (12 boundary points): use the best-exposed frame".into(),
+        });
+        assert_eq!(e.kind(), "no-circle");
+        let text = sentence(&e.to_string());
+        assert!(
+            text.starts_with("IMG_1.jpg: no fish-eye picture circle"),
+            "{text}"
+        );
+        assert!(!text.contains('('), "no nested parentheses: {text}");
+        assert!(text.contains("ordinary photos"), "{text}");
+        let p = check_camera_profile_text("camera.json", "{not json").expect_err("refused");
+        assert!(!p.contains("skydome calibrate"), "{p}");
+        assert!(p.contains("Settings"), "{p}");
+        assert!(p.starts_with("camera.json: "), "{p}");
+    }
+
+    /// A lux reading makes the figures the page shows absolute: the dome's horizontal
+    /// illuminance is the reading (to 1e-6), the luminance range is in cd/m² and 179 times the
+    /// relative one's (Radiance's efficacy, to the percentiles' 1/32-stop resolution), and the false-colour view is a JPEG.
+    #[test]
+    fn a_lux_reading_makes_the_shown_figures_absolute() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo");
+        let frames: Vec<EncodedFrame> = (0..3)
+            .map(|i| {
+                let name = format!("frame_{i}.jpg");
+                let bytes = std::fs::read(format!("{dir}/{name}")).expect("demo frame");
+                EncodedFrame { name, bytes }
+            })
+            .collect();
+        let base = r#""lens": {"detect": {"model": "stereographic", "fov_deg": 235, "circle": null}},
+            "sky": {"crop": true, "north_deg": 0, "sun": "none"}"#;
+        let run = |json: &str| {
+            let o = parse_options(json).expect("options");
+            let dome = run_frames(
+                frames.clone(),
+                Some(vec![0.001, 0.004, 0.016]),
+                &o,
+                &mut |_, _| false,
+            )
+            .expect("run");
+            Outcome::from_dome(dome)
+        };
+        let relative = run(&format!("{{{base}}}"));
+        let absolute = run(&format!(
+            "{{{base}, \"reference\": {{\"illuminance_lux\": 12000}}}}"
+        ));
+        let (r, a) = (
+            relative.luminance_summary().expect("relative"),
+            absolute.luminance_summary().expect("absolute"),
+        );
+        assert!(!r.absolute && a.absolute);
+        let lux = absolute
+            .dome()
+            .report
+            .photometry
+            .and_then(|p| p.horizontal_illuminance_lux)
+            .expect("illuminance");
+        assert!((lux / 12000.0 - 1.0).abs() < 1e-6, "{lux}");
+        assert!(a.p1 > 0.0 && a.p1 <= a.median && a.median <= a.p999 && a.p999 <= a.max);
+        let scale = absolute.dome().report.photometry.expect("photometry").scale;
+        let ratio = a.median / (r.median * scale);
+        assert!((ratio / 179.0 - 1.0).abs() < 0.05, "cd/m² per unit {ratio}");
+        let jpg = absolute.false_colour_bytes().expect("false colour");
+        assert_eq!(jpg[..3], [0xff, 0xd8, 0xff]);
     }
 
     #[test]

@@ -12,8 +12,11 @@ const screens = ['camera', 'work', 'result', 'settings'];
 // (skydome_web::sentence): the worker's errors and the report's warnings arrive made, any other
 // error's message is sent to the worker to be made, and texts this page writes are sentences.
 
-/** An error whose message is a finished sentence. */
-class Sentence extends Error {}
+/** An error whose message is a finished sentence; `kind` is the core's name for it
+ *  (skydome_web::WebError::kind: 'no-circle', 'missing-times', …), when it has one. */
+class Sentence extends Error {
+  constructor(message, kind = null) { super(message); this.kind = kind; }
+}
 
 /** Cancelling a run (the Cancel button says so itself). */
 const cancelled = new Sentence('Cancelled: nothing was saved.');
@@ -31,6 +34,9 @@ async function sentenceOf(err) {
 }
 
 async function showError(err) {
+  // A cancelled run says so itself (the Cancel button's notice); requests it cut short are not
+  // errors.
+  if (err === cancelled) return;
   const text = await sentenceOf(err);
   const m = $('message');
   m.textContent = text;
@@ -45,11 +51,14 @@ function showInfo(text) {
   m.hidden = false;
 }
 
-function clearMessage() { $('message').hidden = true; }
+function clearMessage() { $('message').hidden = true; $('no-circle').hidden = true; }
 
 function show(name) {
   for (const s of screens) $(`screen-${s}`).hidden = s !== name;
   document.body.dataset.screen = name;
+  // Settings cannot change under a running merge; the header button shows where you are.
+  $('to-settings').disabled = name === 'work';
+  $('to-settings').setAttribute('aria-pressed', String(name === 'settings'));
   // The camera runs only on its own screen: during a merge its frame buffers would share the
   // phone's memory with the core.
   if (name === 'camera' && !camera.running() && cameraWanted) startCamera();
@@ -65,15 +74,21 @@ let worker = null;
 let nextId = 1;
 const pending = new Map();
 
+// `?threads=N` on the page's URL sets the threaded core's pool size (0: the single-threaded
+// core); without it the worker picks (one thread per core, when the page is isolated).
+const threadsAsked = new URLSearchParams(location.search).get('threads');
+
 function startWorker() {
-  worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+  const url = new URL('./worker.js', import.meta.url);
+  if (threadsAsked != null) url.searchParams.set('threads', threadsAsked);
+  worker = new Worker(url, { type: 'module' });
   worker.onmessage = (e) => {
-    const { id, progress, result, error } = e.data;
+    const { id, progress, result, error, kind } = e.data;
     const p = pending.get(id);
     if (!p) return;
     if (progress) { p.onProgress && p.onProgress(progress); return; }
     pending.delete(id);
-    if (error) p.reject(new Sentence(error)); else p.resolve(result);
+    if (error) p.reject(new Sentence(error, kind)); else p.resolve(result);
   };
   worker.onerror = (e) => {
     e.preventDefault();
@@ -146,8 +161,11 @@ function northHeading() {
 
 let place = null; // {latitude_deg, longitude_deg} when the user allowed location
 
-async function buildOptions({ tap = null, time = null } = {}) {
+async function buildOptions({ tap = null, time = null, reference = null, plain = false, circle = null } = {}) {
   const o = { products: { preview: true } };
+  if (reference) o.reference = reference;
+  // `plain`: these photos as ordinary (rectangular) ones, whatever the fish-eye setting.
+  if (plain) return o;
   const cam = settings.calibrate ? null : await profiles.active('camera');
   // Without a stored profile the default response source applies: calibrate on this bracket.
   if (cam) o.response = { profile: JSON.parse(cam.json) };
@@ -155,7 +173,7 @@ async function buildOptions({ tap = null, time = null } = {}) {
     const lens = await profiles.active('lens');
     o.lens = lens
       ? { profile: JSON.parse(lens.json) }
-      : { detect: { model: settings.model, fov_deg: settings.fov, circle: null } };
+      : { detect: { model: settings.model, fov_deg: settings.fov, circle } };
     const north = northHeading();
     o.sky = {
       crop: true,
@@ -181,41 +199,150 @@ let lastRun = null; // {options, times, result}
 /** The work screen for a new run; returns its progress handler. The core's events carry the
  *  stage's name, its fraction and the run's (skydome_web::StageProgress: the stages' order is
  *  the core's); the bar never moves back within a run. */
+const STAGE_LABELS = {
+  decoding: 'Reading the photos',
+  lens: 'Finding the lens circle',
+  calibrating: 'Calibrating the camera',
+  merging: 'Merging the exposures',
+  sky: 'Placing the sun and north',
+  pictures: 'Making the preview',
+};
+let workToken = 0;
+
 function startWork(title, text) {
-  show('work');
-  $('work-title').textContent = title;
+  // The bar starts empty before the screen shows, and only this run's events move it.
+  const token = ++workToken;
   $('progress').value = 0;
   $('stage').textContent = text;
+  $('work-title').textContent = title;
+  show('work');
   return (p) => {
+    if (token !== workToken) return;
     $('progress').value = Math.max($('progress').value, p.overall);
-    $('stage').textContent = `${p.stage} ${Math.round(p.fraction * 100)} %`;
+    const label = STAGE_LABELS[p.stage] || p.stage;
+    $('stage').textContent = `${label}… ${Math.round(p.overall * 100)} %`;
   };
 }
 
-async function merge(frames, times, optionExtras = {}) {
+/** The core's refusal of identical photos, in the words that fit a bracket captured here: the
+ *  camera reported the times asked for, so its exposure setting is not to blame. */
+function capturedRefusal(err) {
+  const text = String(err && err.message ? err.message : err);
+  const m = text.match(/^(photo \d+ of \d+)\.jpg: pixels are nearly identical to (photo \d+ of \d+)\.jpg/i);
+  if (!m) return err;
+  return new Sentence(`P${m[1].slice(1)} came out nearly identical to ${m[2]} although the camera reported the exposure times asked for, so this browser cannot bracket with it: take the bracket with the camera app and merge it with Pick photos.`);
+}
+
+async function merge(frames, times, optionExtras = {}, { honoured = false } = {}) {
   clearMessage();
-  const onProgress = startWork('Merging', 'sending the photos to the core');
+  const onProgress = startWork('Merging', 'Handing the photos over…');
   try {
     if (settings.location && !place) place = await locate().catch(() => null);
     const options = await buildOptions(optionExtras);
+    // One photo stays here (a copy), to drag the lens circle on if none is found; the worker
+    // keeps them all for another try.
+    const mid = frames[Math.floor(frames.length / 2)];
+    circlePhoto = mid ? new Blob([mid.bytes.slice(0)], { type: 'image/jpeg' }) : null;
     const payload = { frames, options: JSON.stringify(options), times };
     const transfer = frames.map((f) => f.bytes);
     const result = await ask('run', payload, onProgress, transfer);
-    lastRun = { options, times, result };
+    lastRun = { options, times, result, name: frames.length ? frames[0].name : null };
+    await afterRun(result);
+  } catch (err) {
+    if (err === cancelled) return;
+    show('camera');
+    await showError(honoured ? capturedRefusal(err) : err);
+    if (err.kind === 'no-circle') offerNoCircle(times, optionExtras);
+  }
+}
+
+let circlePhoto = null; // a photo of the last bracket, to drag the lens circle on
+
+/** Merges the photos the worker holds again, with other options (a retry after a refusal). */
+async function mergeAgain(times, optionExtras) {
+  clearMessage();
+  const onProgress = startWork('Merging', 'Starting…');
+  try {
+    const options = await buildOptions(optionExtras);
+    const result = await ask('rerun', { options: JSON.stringify(options), times }, onProgress);
+    lastRun = { options, times, result, name: lastRun ? lastRun.name : null };
     await afterRun(result);
   } catch (err) {
     if (err === cancelled) return;
     show('camera');
     await showError(err);
+    if (err.kind === 'no-circle') offerNoCircle(times, optionExtras);
   }
 }
 
-async function rerunWithTap(tap) {
-  const onProgress = startWork('Marking the sun', 'starting');
+/** No fish-eye circle: offer the ordinary (rectangular) path for these photos, and giving the
+ *  circle by hand (dragging it on the photo). */
+function offerNoCircle(times, optionExtras) {
+  const box = $('no-circle');
+  box.hidden = false;
+  $('no-circle-drag').hidden = !circlePhoto;
+  $('no-circle-plain').onclick = () => { box.hidden = true; mergeAgain(times, { ...optionExtras, plain: true }); };
+  $('no-circle-drag').onclick = () => { box.hidden = true; editCircle(times, optionExtras); };
+  box.scrollIntoView({ block: 'nearest' });
+}
+
+/** The circle editor: the photo with a circle to drag (centre) and size (slider), in the
+ *  photo's pixels; "Use this circle" merges with it as the lens circle. */
+async function editCircle(times, optionExtras) {
+  const img = $('circle-photo');
+  if (img.src) URL.revokeObjectURL(img.src);
+  img.src = URL.createObjectURL(circlePhoto);
+  await img.decode();
+  const w = img.naturalWidth;
+  const h = img.naturalHeight;
+  const c = { cx: w / 2, cy: h / 2, r: Math.min(w, h) / 2 };
+  const svg = $('circle-svg');
+  svg.setAttribute('viewBox', `0 0 ${w} ${h}`);
+  const ring = $('circle-ring');
+  const slider = $('circle-r');
+  slider.min = String(Math.round(Math.min(w, h) / 10));
+  slider.max = String(Math.round(Math.max(w, h) * 0.75));
+  slider.value = String(Math.round(c.r));
+  const draw = () => {
+    ring.setAttribute('cx', c.cx); ring.setAttribute('cy', c.cy); ring.setAttribute('r', c.r);
+    ring.setAttribute('stroke-width', String(Math.max(2, w / 150)));
+    document.body.dataset.circle = `${Math.round(c.cx)},${Math.round(c.cy)},${Math.round(c.r)}`;
+  };
+  draw();
+  const toPhoto = (ev) => {
+    const rect = svg.getBoundingClientRect();
+    return { x: ((ev.clientX - rect.left) / rect.width) * w, y: ((ev.clientY - rect.top) / rect.height) * h };
+  };
+  let dragging = false;
+  svg.onpointerdown = (ev) => { dragging = true; svg.setPointerCapture(ev.pointerId); const p = toPhoto(ev); c.cx = p.x; c.cy = p.y; draw(); };
+  svg.onpointermove = (ev) => { if (!dragging) return; const p = toPhoto(ev); c.cx = p.x; c.cy = p.y; draw(); };
+  svg.onpointerup = () => { dragging = false; };
+  slider.oninput = () => { c.r = Number(slider.value); draw(); };
+  $('circle-use').onclick = () => {
+    $('circle-editor').hidden = true;
+    const circle = { cx: Math.round(c.cx * 10) / 10, cy: Math.round(c.cy * 10) / 10, r: Math.round(c.r * 10) / 10 };
+    mergeAgain(times, { ...optionExtras, circle });
+  };
+  $('circle-cancel').onclick = () => { $('circle-editor').hidden = true; };
+  $('circle-editor').hidden = false;
+  $('circle-editor').scrollIntoView({ block: 'start' });
+}
+
+/** The sun tapped in the last run, if it was tapped. */
+function tappedSun() {
+  const sky = lastRun && lastRun.options.sky;
+  return sky && sky.sun && sky.sun.tap ? sky.sun.tap : null;
+}
+
+async function rerunWithTap(tap) { return rerun('Marking the sun', { tap, reference: lastRun.options.reference || null }); }
+
+/** Merges the same photos again with a tapped sun and/or meter readings. */
+async function rerun(title, { tap = tappedSun(), reference = null }) {
+  const onProgress = startWork(title, 'Starting…');
   try {
-    const options = await buildOptions({ tap, time: lastRun.options.sky ? lastRun.options.sky.time : null });
+    const options = await buildOptions({ tap, reference, time: lastRun.options.sky ? lastRun.options.sky.time : null });
     const result = await ask('rerun', { options: JSON.stringify(options), times: lastRun.times }, onProgress);
-    lastRun = { options, times: lastRun.times, result };
+    lastRun = { ...lastRun, options, result };
     await afterRun(result);
   } catch (err) {
     if (err === cancelled) return;
@@ -228,7 +355,10 @@ async function afterRun(result) {
   // Keep what the core learned: the camera profile (first calibration) and the lens.
   if (result.camera_profile) {
     const prof = JSON.parse(result.camera_profile);
-    const name = [prof.make, prof.model].filter(Boolean).join(' ') || 'this phone\'s camera';
+    // Named after the camera that took the photos (EXIF); only a bracket captured here is
+    // "this phone's camera".
+    const name = [prof.make, prof.model].filter(Boolean).join(' ')
+      || (lastRunSource === 'camera' ? 'this phone\'s camera' : `the camera of ${lastRun.name || 'the picked photos'}`);
     const stored = await profiles.list();
     const hasActive = stored.some((p) => p.kind === 'camera' && p.active);
     const known = stored.some((p) => p.kind === 'camera' && p.name === name);
@@ -247,54 +377,93 @@ async function afterRun(result) {
   img.src = URL.createObjectURL(new Blob([jpg.bytes], { type: 'image/jpeg' }));
   img.dataset.width = result.width;
   img.dataset.height = result.height;
+  showView(false);
+  const fc = $('false-colour');
+  if (fc.src) URL.revokeObjectURL(fc.src);
+  fc.removeAttribute('src');
   showFacts(result);
+  showSpot();
   show('result');
   window.__skydomeCoreMs = result.ms; // read by web-tests/measure.mjs
   window.__skydomeStageMs = result.stages;
+  window.__skydomeCore = result.core;
   document.body.dataset.ready = String(Date.now());
 }
 
 function fmt(v, d = 1) { return v == null ? '—' : Number(v).toFixed(d); }
 
+/** A photometric figure with three significant digits (e.g. 12 300, 0.0451). */
+function sig(v) {
+  if (v == null || !Number.isFinite(v)) return '—';
+  if (v === 0) return '0';
+  const e = Math.floor(Math.log10(Math.abs(v)));
+  const r = Number(v.toPrecision(3));
+  return e >= 3 ? Math.round(r).toLocaleString('en-US').replace(/,/g, ' ') : String(r);
+}
+
 function showFacts(result) {
   const r = result.report;
   const facts = [];
-  facts.push(['Size', `${r.width} × ${r.height} px`]);
-  facts.push(['Frames', r.frames.map((f) => (f.time_s < 1 ? `1/${Math.round(1 / f.time_s)}` : `${f.time_s}`) + ' s').join(', ')]);
-  facts.push(['Response', r.response]);
+  const lum = result.luminance;
+  const absolute = !!(lum && lum.absolute);
+  const photometry = r.photometry;
+  facts.push(['Picture', `${r.width} × ${r.height} pixels`]);
+  facts.push(['Photos', `${r.frames.length}, exposed ${r.frames.map((f) => (f.time_s < 1 ? `1/${Math.round(1 / f.time_s)}` : `${f.time_s}`) + ' s').join(', ')}`]);
+  facts.push(['Camera response', r.response === 'profile' ? 'from the stored camera profile' : 'measured from these photos']);
+  if (photometry && photometry.horizontal_illuminance_lux != null) {
+    facts.push(['Horizontal illuminance', `${sig(photometry.horizontal_illuminance_lux)} lux: the light the whole sky puts on a level surface`]);
+  } else if (!absolute) {
+    facts.push(['Horizontal illuminance', 'needs a meter reading (Meter readings, below): the photos alone give relative values']);
+  }
+  if (photometry && photometry.disagreement_percent != null) {
+    facts.push(['Meter agreement', `the lux reading and the spot reading disagree by ${fmt(photometry.disagreement_percent, 1)} %`]);
+  }
+  if (lum) {
+    const unit = absolute ? ' cd/m²' : ' (relative units)';
+    facts.push(['Sky luminance', `${sig(lum.p1)} to ${sig(lum.p999)}${unit} (1st to 99.9th percentile), median ${sig(lum.median)}, brightest ${sig(lum.max)}`]);
+  }
   const g = r.geometry;
   const sunMark = $('sun-mark');
   sunMark.hidden = true;
   if (g) {
     if (g.sun) {
       const s = g.sun;
-      const dir = s.azimuth_deg != null ? `azimuth ${fmt(s.azimuth_deg, 2)}°, elevation ${fmt(s.elevation_deg, 2)}°` : `elevation ${fmt(s.elevation_deg, 2)}°`;
-      facts.push(['Sun', `${g.sun_source}: (${fmt(s.pixel.x)}, ${fmt(s.pixel.y)}) ${dir}`]);
+      const how = { detected: 'found in the picture', tap: 'where you tapped', ephemeris: 'from the date, time and place' }[g.sun_source] || g.sun_source;
+      const dir = s.azimuth_deg != null ? `${fmt(s.azimuth_deg, 1)}° from north towards east, ${fmt(s.elevation_deg, 1)}° above the horizon` : `${fmt(s.elevation_deg, 1)}° above the horizon`;
+      facts.push(['Sun', `${dir} (${how})`]);
       sunMark.style.left = `${(100 * s.pixel.x) / r.width}%`;
       sunMark.style.top = `${(100 * s.pixel.y) / r.height}%`;
       sunMark.hidden = false;
     } else {
-      facts.push(['Sun', 'none found: double-tap it']);
+      facts.push(['Sun', 'none found: double-tap it on the picture']);
+      // A sun the lens setting misses: the usual cause is the projection or field of view.
+      if (!lastRun.options.lens.profile) {
+        facts.push(['Lens hint', `no sun was found with the ${lastRun.options.lens.detect.model} ${lastRun.options.lens.detect.fov_deg}° lens setting; if the sun is in the picture, the lens may be another kind (a 180° sky camera is usually equisolid 180°): change it in Settings and merge again`]);
+      }
     }
-    facts.push(['North', g.north ? `(${fmt(g.north.x)}, ${fmt(g.north.y)}), heading ${fmt(lastRun.options.sky.north_deg)}°` : 'unknown (no compass)']);
-    if (g.sun_ephemeris) {
-      facts.push(['Sun (ephemeris)', `azimuth ${fmt(g.sun_ephemeris.azimuth_deg, 2)}°, elevation ${fmt(g.sun_ephemeris.elevation_deg, 2)}°`]);
-    }
+    const north = lastRun.options.sky.north_deg;
+    facts.push(['North', north != null ? `the phone's top edge pointed ${fmt(north, 1)}° from north` : 'unknown (no compass reading; type the heading in Settings)']);
     if (g.sun_disc) {
-      // The core's reasons, in this page's words (skydome::sun_disc::DirectSource).
+      const d = g.sun_disc;
       const from = {
-        measured_illuminance: 'the measured illuminance',
-        model_direct_normal: 'the IES clear-sky model (±25 %)',
-        model_ratio: 'the IES clear-sky model\'s direct/diffuse ratio (±25 %)',
-      }[g.sun_disc.from] || g.sun_disc.from;
-      const unit = g.sun_disc.absolute ? ' cd/m²' : ' (relative units)';
-      facts.push(['Sun disc', `clipped in every photo: rebuilt at ${g.sun_disc.luminance.toExponential(2)}${unit} from ${from}`]);
+        measured_illuminance: 'your lux reading',
+        model_direct_normal: 'a clear-sky model (±25 %)',
+        model_ratio: 'a clear-sky model\'s direct/diffuse ratio (±25 %)',
+      }[d.from] || d.from;
+      const u = d.absolute ? ' lux' : ' (relative)';
+      facts.push(['Sun, direct and diffuse', `direct ${sig(d.direct_horizontal)}${u} and diffuse ${sig(d.diffuse_horizontal)}${u} on a level surface; the sun was too bright for every photo, so its disc was rebuilt from ${from}`]);
+    }
+    if (g.sun_ephemeris) {
+      facts.push(['Sun from the date and place', `${fmt(g.sun_ephemeris.azimuth_deg, 1)}° from north, ${fmt(g.sun_ephemeris.elevation_deg, 1)}° up`]);
     }
     if (g.sun_cross_check) {
-      facts.push(['Cross-check', `${fmt(g.sun_cross_check.angle_deg, 2)}° apart; a compass error of ${fmt(g.sun_cross_check.compass_error_deg, 1)}° would explain it`]);
+      facts.push(['Cross-check', `the sun in the picture is ${fmt(g.sun_cross_check.angle_deg, 1)}° from where the date, time and place put it; a compass off by ${fmt(g.sun_cross_check.compass_error_deg, 1)}° would explain that`]);
+    } else if (settings.location && !place) {
+      facts.push(['Cross-check', 'no location was given, so the sun found in the picture could not be checked against the date, time and place']);
     }
   }
-  facts.push(['Time in the core', `${(result.ms / 1000).toFixed(2)} s`]);
+  const core = result.core || { threads: 1 };
+  facts.push(['Time in the core', `${(result.ms / 1000).toFixed(2)} s on ${core.threads === 1 ? 'one thread' : `${core.threads} threads`}`]);
   const dl = $('facts');
   dl.replaceChildren();
   for (const [k, v] of facts) {
@@ -310,6 +479,77 @@ function showFacts(result) {
   $('save-equirect').hidden = !lastRun.options.products.equirect;
   $('tap-hint').hidden = !g;
   $('save-exr').hidden = false;
+  $('view-toggle').textContent = absolute ? 'False colour, cd/m²' : 'False colour';
+}
+
+// ---------------------------------------------------------------------------------------------
+// The false-colour view (the core's, as `skydome falsecolor` draws it) and meter readings.
+
+/** Shows the false-colour view (true) or the picture (false). */
+async function showView(falseColour) {
+  const b = $('view-toggle');
+  b.setAttribute('aria-pressed', String(falseColour));
+  const fc = $('false-colour');
+  if (falseColour && !fc.getAttribute('src')) {
+    try {
+      const r = await ask('product', { name: 'falsecolour' });
+      fc.src = URL.createObjectURL(new Blob([r.bytes], { type: 'image/jpeg' }));
+      await fc.decode().catch(() => {});
+    } catch (err) { await showError(err); return; }
+  }
+  fc.hidden = !falseColour;
+  $('preview').hidden = falseColour;
+  $('sun-mark').hidden = falseColour || !(lastRun && lastRun.result.report.geometry && lastRun.result.report.geometry.sun);
+  $('spot-mark').hidden = falseColour || !spot;
+  document.body.dataset.view = falseColour ? 'false-colour' : 'picture';
+}
+
+let spot = null;       // the metered spot: {input: {x, y} (input-photo pixels), preview: {x, y}}
+let markingSpot = false;
+
+function showSpot() {
+  const m = $('spot-mark');
+  const img = $('preview');
+  if (!spot) { m.hidden = true; return; }
+  m.style.left = `${(100 * spot.preview.x) / Number(img.dataset.width)}%`;
+  m.style.top = `${(100 * spot.preview.y) / Number(img.dataset.height)}%`;
+  m.hidden = img.hidden;
+  $('meter-spot-at').textContent = `Spot at pixel (${fmt(spot.input.x, 0)}, ${fmt(spot.input.y, 0)}) of the photos, averaged over ${SPOT_RADIUS_PX} pixels around it.`;
+}
+
+/** The metered patch's radius, input-photo pixels (a spot meter's 1° is a few pixels). */
+const SPOT_RADIUS_PX = 5;
+
+async function markSpot(ev) {
+  markingSpot = false;
+  $('meter-mark').setAttribute('aria-pressed', 'false');
+  try {
+    const pv = previewPixel(ev);
+    const input = await ask('inputPixel', pv);
+    spot = { input: { x: Math.round(input.x * 10) / 10, y: Math.round(input.y * 10) / 10 }, preview: pv };
+    showSpot();
+  } catch (err) { await showError(err); }
+}
+
+async function applyReadings() {
+  clearMessage();
+  const lux = $('meter-lux').value.trim();
+  const cd = $('meter-cd').value.trim();
+  const reference = {};
+  if (lux !== '') {
+    if (!(Number(lux) > 0)) { await showError(new Sentence('Type the illuminance as a positive number of lux.')); return; }
+    reference.illuminance_lux = Number(lux);
+  }
+  if (cd !== '') {
+    if (!(Number(cd) > 0)) { await showError(new Sentence('Type the spot luminance as a positive number of cd/m².')); return; }
+    if (!spot) { await showError(new Sentence('Tap “Mark the spot” and then the place the meter pointed at, so the spot reading has a place.')); return; }
+    reference.luminance = { pixel: spot.input, radius_px: SPOT_RADIUS_PX, cd_per_m2: Number(cd) };
+  }
+  if (!reference.illuminance_lux && !reference.luminance) {
+    await showError(new Sentence('Type a lux reading, a spot luminance in cd/m², or both.'));
+    return;
+  }
+  await rerun('Applying the readings', { reference });
 }
 
 function locate() {
@@ -329,6 +569,7 @@ const saves = {
   'save-hdr': { name: 'hdr', ext: 'hdr', type: 'image/vnd.radiance' },
   'save-jpg': { name: 'preview', ext: 'jpg', type: 'image/jpeg' },
   'save-exr': { name: 'exr', ext: 'exr', type: 'image/x-exr' },
+  'save-false': { name: 'falsecolour', ext: 'jpg', type: 'image/jpeg', suffix: '_falsecolour' },
   'save-equirect': { name: 'equirect', ext: 'hdr', type: 'image/vnd.radiance', suffix: '_latlong' },
 };
 
@@ -346,10 +587,21 @@ async function productFile(kind) {
 
 async function save(kind) {
   clearMessage();
+  const b = $(kind);
+  const label = b.textContent;
+  b.disabled = true;
+  b.textContent = 'Saving…';
   try {
     const file = await productFile(kind);
     download(file);
-  } catch (err) { showError(err); }
+    const mb = file.size / 2 ** 20;
+    showInfo(`Saved ${file.name} (${mb >= 0.1 ? `${mb.toFixed(1)} MB` : `${Math.ceil(file.size / 1024)} KB`}) to this phone's downloads.`);
+  } catch (err) {
+    await showError(err);
+  } finally {
+    b.disabled = false;
+    b.textContent = label;
+  }
 }
 
 function download(file) {
@@ -390,6 +642,10 @@ function previewPixel(ev) {
 let lastTap = 0;
 let lastTouchDouble = 0;
 async function onPreviewTap(ev) {
+  if (markingSpot) {
+    if (ev.type === 'click') await markSpot(ev);
+    return;
+  }
   const now = ev.timeStamp;
   // A touch double tap may be followed by a synthesised dblclick: count it once.
   if (ev.type === 'dblclick' && now - lastTouchDouble < 800) return;
@@ -441,10 +697,16 @@ function drawOverlay() {
   g.lineWidth = lw;
   g.strokeStyle = '#ffd400';
   g.beginPath(); g.arc(marks.circle.cx, marks.circle.cy, marks.circle.r, 0, 2 * Math.PI); g.stroke();
+  // The horizon: white dashes on a black line, visible on a bright sky and a dark housing alike.
+  g.lineWidth = 2 * lw;
+  g.strokeStyle = '#000000';
+  g.beginPath(); g.arc(marks.horizon.cx, marks.horizon.cy, marks.horizon.r, 0, 2 * Math.PI); g.stroke();
+  g.lineWidth = 1.4 * lw;
   g.setLineDash([4 * lw, 3 * lw]);
   g.strokeStyle = '#ffffff';
   g.beginPath(); g.arc(marks.horizon.cx, marks.horizon.cy, marks.horizon.r, 0, 2 * Math.PI); g.stroke();
   g.setLineDash([]);
+  g.lineWidth = lw;
   if (n) {
     g.fillStyle = '#1e6bff';
     g.strokeStyle = '#ffffff';
@@ -526,7 +788,8 @@ async function startCamera() {
   try {
     await camera.start($('video'));
     const caps = camera.manualExposure();
-    $('capture').disabled = false;
+    // Capture only where the camera confirmed manual exposure.
+    $('capture').disabled = !caps;
     $('camera-status').textContent = caps
       ? `Manual exposure ${caps.exposureTime.min / 10}–${caps.exposureTime.max / 10} ms available: lay the phone screen-down, camera up, and tap Capture.`
       : 'This browser offers no manual exposure for this camera: pick bracketed photos from the gallery instead.';
@@ -561,11 +824,11 @@ async function capture() {
     const frames = [];
     for (const f of shot.frames) frames.push({ name: f.name, bytes: await f.blob.arrayBuffer() });
     lastRunSource = 'camera';
-    await merge(frames, shot.frames.map((f) => f.time_s), { time: when });
+    await merge(frames, shot.frames.map((f) => f.time_s), { time: when }, { honoured: true });
   } catch (err) {
     await showError(err);
   } finally {
-    $('capture').disabled = false;
+    $('capture').disabled = !camera.manualExposure();
   }
 }
 
@@ -595,11 +858,82 @@ async function fromGallery(ev) {
     let times = [];
     if (lists.length > 0) {
       times = await ask('times', { listName: lists[0].name, text: await lists[0].text(), names: files.map((f) => f.name) });
+    } else {
+      // Photos without an exposure time in EXIF: a field per photo (pre-filled where EXIF has
+      // one) instead of an error. EXIF sits in a JPEG's first blocks; other files go whole.
+      const metas = [];
+      for (const f of files) {
+        const bytes = await (/\.jpe?g$/i.test(f.name) ? f.slice(0, 256 * 1024) : f).arrayBuffer();
+        metas.push(await ask('metadata', { bytes }, null, [bytes]));
+      }
+      if (metas.some((m) => m.exposure_time_s == null)) {
+        askTimes(files, metas);
+        return;
+      }
     }
-    const frames = [];
-    for (const f of files) frames.push({ name: f.name, bytes: await f.arrayBuffer() });
-    lastRunSource = 'gallery';
-    await merge(frames, times);
+    await mergeFiles(files, times);
+  } catch (err) { await showError(err); }
+}
+
+async function mergeFiles(files, times) {
+  const frames = [];
+  for (const f of files) frames.push({ name: f.name, bytes: await f.arrayBuffer() });
+  lastRunSource = 'gallery';
+  await merge(frames, times);
+}
+
+/** A time for the field: 1/250 below a second, else seconds. */
+function timeText(t) {
+  if (t == null) return '';
+  return t < 1 ? `1/${Math.round(1 / t)}` : String(t);
+}
+
+let timesFiles = null;
+
+/** The exposure-time form: one field per picked photo, in the order picked. */
+function askTimes(files, metas) {
+  timesFiles = files;
+  const ol = $('times-list');
+  ol.replaceChildren();
+  files.forEach((f, i) => {
+    const li = document.createElement('li');
+    const label = document.createElement('label');
+    label.append(`${f.name}, seconds `);
+    const input = document.createElement('input');
+    input.type = 'text';
+    input.inputMode = 'decimal';
+    input.name = `time-${i}`;
+    input.placeholder = '1/250';
+    input.value = timeText(metas[i].exposure_time_s);
+    input.required = true;
+    label.append(input);
+    li.append(label);
+    ol.append(li);
+  });
+  $('times-form').hidden = false;
+  const first = [...ol.querySelectorAll('input')].find((x) => !x.value);
+  if (first) first.focus();
+  $('times-form').scrollIntoView({ block: 'nearest' });
+}
+
+async function submitTimes(ev) {
+  ev.preventDefault();
+  clearMessage();
+  const files = timesFiles;
+  if (!files) return;
+  try {
+    // Each field is read by the core as the command line reads a --times-file line, so
+    // "1/250", "0.004" and "2" mean what they mean there; its message names the photo.
+    const times = [];
+    for (const [i, f] of files.entries()) {
+      const v = $('times-list').querySelector(`[name="time-${i}"]`).value.trim();
+      if (!v) throw new Sentence(`Type the exposure time of ${f.name} (as 1/250 or 0.004 seconds).`);
+      const [t] = await ask('times', { listName: f.name, text: `photo ${v}\n`, names: ['photo'] });
+      times.push(t);
+    }
+    $('times-form').hidden = true;
+    timesFiles = null;
+    await mergeFiles(files, times);
   } catch (err) { await showError(err); }
 }
 
@@ -670,9 +1004,26 @@ function wire() {
   $('to-settings').onclick = () => { show('settings'); renderProfiles().catch(showError); };
   $('settings-done').onclick = () => { saveSettings(); show('camera'); };
   $('gallery').addEventListener('change', fromGallery);
+  $('times-form').addEventListener('submit', submitTimes);
+  $('times-cancel').onclick = () => { $('times-form').hidden = true; timesFiles = null; };
+  $('view-toggle').onclick = () => showView($('view-toggle').getAttribute('aria-pressed') !== 'true');
+  $('meter-mark').onclick = () => {
+    markingSpot = !markingSpot;
+    $('meter-mark').setAttribute('aria-pressed', String(markingSpot));
+    if (markingSpot) showView(false);
+    $('meter-spot-at').textContent = markingSpot ? 'Now tap the place the meter pointed at.' : $('meter-spot-at').textContent;
+  };
+  $('meter-apply').onclick = applyReadings;
+  $('settings-done-top').onclick = () => { saveSettings(); show('camera'); };
   $('capture').onclick = capture;
   $('cancel').onclick = () => { cancelWork(); show('camera'); showInfo('Cancelled: nothing was saved.'); };
-  $('back').onclick = () => { clearMessage(); show('camera'); };
+  $('back').onclick = () => {
+    clearMessage();
+    spot = null;
+    $('meter-lux').value = '';
+    $('meter-cd').value = '';
+    show('camera');
+  };
   for (const id of Object.keys(saves)) $(id).onclick = () => save(id);
   $('share').hidden = !(navigator.canShare && navigator.canShare({ files: [new File([''], 'x.hdr')] }));
   $('share').onclick = share;
@@ -680,6 +1031,7 @@ function wire() {
   const img = $('preview');
   img.addEventListener('dblclick', onPreviewTap);
   img.addEventListener('touchend', onPreviewTap);
+  img.addEventListener('click', onPreviewTap);
   compass.start((h) => {
     $('heading').textContent = `${h.toFixed(1)}° (top edge)`;
     $('compass-permission').hidden = true;
@@ -687,15 +1039,36 @@ function wire() {
   }, () => {
     const b = $('compass-permission');
     b.hidden = false;
-    b.onclick = () => compass.requestPermission().then(() => { b.hidden = true; }).catch(showError);
+    b.onclick = () => {
+      $('heading').textContent = 'asking for the compass…';
+      compass.requestPermission()
+        .then(() => { b.hidden = true; $('heading').textContent = 'waiting for the first reading (turn the phone a little)'; })
+        .catch((err) => { $('heading').textContent = 'not allowed'; showError(err); });
+    };
   });
 }
 
 startWorker();
+// Which core the worker loaded ({build, threads, reason}), for the browser tests.
+ask('core').then((c) => { document.body.dataset.core = c.build; document.body.dataset.threads = String(c.threads); }).catch(() => {});
 window.__skydomeAsk = ask; // for web-tests/measure.mjs (the worker's memory)
 wire();
 show('camera');
 startCamera();
 if ('serviceWorker' in navigator) {
   navigator.serviceWorker.register('sw.js').catch(() => {});
+  // The isolation shim (sw.js adds COOP/COEP to every response, for hosts that cannot): a page
+  // loaded before the service worker controlled it is not isolated, so it reloads once, when
+  // nothing is under way, to get the threaded core. Once per tab: a browser that will not
+  // isolate keeps the single-threaded core without reloading again.
+  if (!window.crossOriginIsolated && window.isSecureContext) {
+    const reload = () => {
+      if (!navigator.serviceWorker.controller || sessionStorage.getItem('skydome.isolationReload')) return;
+      if (document.body.dataset.screen !== 'camera') { setTimeout(reload, 2000); return; }
+      sessionStorage.setItem('skydome.isolationReload', '1');
+      location.reload();
+    };
+    navigator.serviceWorker.addEventListener('controllerchange', reload);
+    reload();
+  }
 }

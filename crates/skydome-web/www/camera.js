@@ -112,7 +112,7 @@ export async function captureBracket({ iso, shots, spacing }, exifTime, onStep) 
     exposureMode: 'continuous', iso, whiteBalanceMode: 'manual', focusMode: 'manual',
   });
   await track.applyConstraints({ advanced: [lock.set] });
-  onStep('letting the exposure settle');
+  onStep('Letting the exposure settle…');
   await sleep(800);
   const auto = track.getSettings();
   const t0 = auto.exposureTime || Math.sqrt(caps.exposureTime.min * caps.exposureTime.max);
@@ -121,7 +121,7 @@ export async function captureBracket({ iso, shots, spacing }, exifTime, onStep) 
   const frames = [];
   const readBack = [];
   for (const [i, t] of wantedTimes.entries()) {
-    onStep(`shot ${i + 1} of ${wantedTimes.length}: ${(t / 10).toFixed(1)} ms`);
+    onStep(`Taking photo ${i + 1} of ${wantedTimes.length} (${(t / 10).toFixed(1)} ms)…`);
     const c = buildConstraints(caps, {
       exposureMode: 'manual', exposureTime: t, iso, whiteBalanceMode: 'manual', focusMode: 'manual',
     });
@@ -133,12 +133,14 @@ export async function captureBracket({ iso, shots, spacing }, exifTime, onStep) 
       throw new CameraRefusal(`The camera ignored the requested exposure time (asked ${(c.set.exposureTime / 10).toFixed(1)} ms, it reports ${s.exposureTime == null ? 'none' : (s.exposureTime / 10).toFixed(1) + ' ms'}), so no bracket was taken.`);
     }
     const blob = await capture.takePhoto();
-    const exif = await exifTime(blob, `shot_${i + 1}.jpg`);
+    // Named as the user would call them: the core's messages name the photo.
+    const name = `photo ${i + 1} of ${wantedTimes.length}.jpg`;
+    const exif = await exifTime(blob, name);
     const asked = c.set.exposureTime * 1e-4;
     if (exif != null && Math.abs(Math.log2(exif / asked)) > 0.35) {
       throw new CameraRefusal(`The camera ignored the requested exposure time (asked ${(asked * 1000).toFixed(1)} ms, the photo says ${(exif * 1000).toFixed(1)} ms), so no bracket was taken.`);
     }
-    frames.push({ name: `shot_${i + 1}.jpg`, blob, time_s: exif ?? s.exposureTime * 1e-4 });
+    frames.push({ name, blob, time_s: exif ?? s.exposureTime * 1e-4 });
   }
   // Back to automatic exposure for the live view.
   await track.applyConstraints({ advanced: [buildConstraints(caps, { exposureMode: 'continuous' }).set] }).catch(() => {});

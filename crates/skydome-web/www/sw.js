@@ -1,13 +1,16 @@
-// Service worker: the app works offline after the first visit. Every file of the app is cached
-// at install; requests for them are answered from the cache first (the app is versioned by
-// CACHE, which build.sh stamps with the build's hash). Nothing else is fetched: photos never
-// leave the phone.
+// Service worker: the app works offline after the first visit, and is cross-origin isolated on
+// hosts that cannot send headers.
+//
+// Offline: every file of the app (FILES, listed by build.sh) is cached at install; requests for
+// them are answered from the cache first (the app is versioned by CACHE, which build.sh stamps
+// with the build's hash). Nothing else is fetched: photos never leave the phone.
+//
+// Isolation shim: the threaded core needs `crossOriginIsolated` (COOP/COEP headers on every
+// response). A host like GitHub Pages cannot send them, so every response this worker hands
+// the page carries them; the page reloads itself once when this worker first takes control of
+// a page that was not isolated (app.js). Where the host sends them already nothing changes.
 const CACHE = 'skydome-@BUILD@';
-const FILES = [
-  './', 'index.html', 'app.css', 'app.js', 'camera.js', 'compass.js', 'profiles.js', 'worker.js', 'decoder.js',
-  'manifest.webmanifest', 'icons/icon.svg', 'icons/icon-192.png', 'icons/icon-512.png',
-  'pkg/skydome_web.js', 'pkg/skydome_web_bg.wasm',
-];
+const FILES = ['./', '@FILES@'];
 
 self.addEventListener('install', (e) => {
   e.waitUntil(caches.open(CACHE).then((c) => c.addAll(FILES)).then(() => self.skipWaiting()));
@@ -21,10 +24,22 @@ self.addEventListener('activate', (e) => {
   );
 });
 
+/** `r` with the isolation headers (a copy: cached and fetched responses are immutable). */
+function isolated(r) {
+  if (!r || r.status === 0 || r.type === 'opaque' || r.type === 'opaqueredirect') return r;
+  const headers = new Headers(r.headers);
+  headers.set('Cross-Origin-Opener-Policy', 'same-origin');
+  headers.set('Cross-Origin-Embedder-Policy', 'require-corp');
+  headers.set('Cross-Origin-Resource-Policy', 'same-origin');
+  return new Response(r.body, { status: r.status, statusText: r.statusText, headers });
+}
+
 self.addEventListener('fetch', (e) => {
   const url = new URL(e.request.url);
   if (e.request.method !== 'GET' || url.origin !== self.location.origin) return;
   e.respondWith(
-    caches.open(CACHE).then((c) => c.match(e.request, { ignoreSearch: true }).then((hit) => hit || fetch(e.request))),
+    caches.open(CACHE)
+      .then((c) => c.match(e.request, { ignoreSearch: true }).then((hit) => hit || fetch(e.request)))
+      .then(isolated),
   );
 });

@@ -4,12 +4,54 @@
 // Messages in: {id, type, ...}; messages out: {id, progress: {stage, fraction, overall}} while
 // running (skydome_web::StageProgress: the stage names and their order are the core's), then
 // {id, result} or {id, error: 'One human sentence.'} (the core's skydome_web::sentence).
-import init, {
-  Job, detect_circle, photo_exposure, check_camera_profile, check_lens_profile, live_overlay, list_times,
-  decoding_progress, sentence, warm_up,
-} from './pkg/skydome_web.js';
+//
+// Two builds of the same core: pkg-mt/ (threaded: the library's rayon parallelism on a pool of
+// Web Workers, wasm-bindgen-rayon) is loaded when the page is cross-origin isolated (COOP/COEP
+// headers, or the service worker's shim; see docs/phone.md), else pkg/ (single-threaded). They
+// write the same bytes. `?threads=N` on this worker's URL (from the page's own `?threads=N`)
+// sets the pool's size; 0 forces the single-threaded build.
 
-const ready = init();
+let Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
+  list_times, decoding_progress, sentence, warm_up;
+/** Which core runs: {build: 'threaded' | 'single', threads, reason} (reason: why single). */
+let coreInfo = null;
+
+const asked = new URL(self.location.href).searchParams.get('threads');
+const poolSize = asked != null && asked !== '' && Number.isFinite(Number(asked))
+  ? Math.max(0, Math.floor(Number(asked)))
+  : Math.min(8, Math.max(1, navigator.hardwareConcurrency || 1));
+
+async function loadCore() {
+  let reason = null;
+  if (poolSize === 0) reason = 'asked for one thread';
+  else if (self.crossOriginIsolated !== true || typeof SharedArrayBuffer !== 'function') {
+    reason = 'the page is not cross-origin isolated';
+  } else {
+    try {
+      const m = await import('./pkg-mt/skydome_web.js');
+      const wasm = await m.default();
+      await m.initThreadPool(poolSize);
+      return { m, wasm, info: { build: 'threaded', threads: m.core_threads(), reason: null } };
+    } catch (err) {
+      reason = `the threaded core did not start (${messageOf(err)})`;
+      console.warn(`skydome: ${reason}; using the single-threaded core`);
+    }
+  }
+  const m = await import('./pkg/skydome_web.js');
+  const wasm = await m.default();
+  return { m, wasm, info: { build: 'single', threads: 1, reason } };
+}
+
+let memoryRef = null;
+const ready = loadCore().then(({ m, wasm, info }) => {
+  ({
+    Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
+    list_times, decoding_progress, sentence, warm_up,
+  } = m);
+  coreInfo = info;
+  memoryRef = wasm.memory || null;
+  return wasm;
+});
 // Once loaded, the core merges a tiny synthetic bracket (about 0.1 s) so the browser compiles
 // its loops into optimised code before the user's first merge (see skydome_web::warm_up);
 // skipped when a merge came first.
@@ -32,6 +74,7 @@ const HELPERS = typeof Worker === 'undefined' ? 0 : Math.min(3, Math.max(0, (nav
 let helpers = [];
 function startHelpers() {
   helpers = [];
+  if (coreInfo && coreInfo.build === 'threaded') return;
   for (let k = 0; k < HELPERS; k++) {
     let h;
     try {
@@ -65,6 +108,9 @@ function retireHelpers() {
 async function decodeInto(id, frames) {
   const j = new Job();
   for (const f of frames) j.add_frame(f.name, new Uint8Array(f.bytes));
+  // The threaded core decodes the photos itself, several at once in its own pool (one memory,
+  // no decoding workers' memories beside it).
+  if (coreInfo && coreInfo.build === 'threaded') return j;
   const shares = helpers.length + 1;
   const errors = new Array(frames.length).fill(null);
   let done = 0;
@@ -161,6 +207,8 @@ function runJob(id, optionsJson, times) {
     lens_profile: outcome.lens_profile_json(),
     ms: performance.now() - t0,
     stages,
+    core: coreInfo,
+    luminance: JSON.parse(outcome.luminance_json()),
   };
 }
 
@@ -185,6 +233,7 @@ const products = {
   exr: () => outcome.exr(),
   equirect: () => outcome.equirect_hdr(),
   preview: () => outcome.preview_jpeg(),
+  falsecolour: () => outcome.false_colour_jpeg(),
 };
 
 const handlers = {
@@ -208,6 +257,7 @@ const handlers = {
     return { x: p[0], y: p[1] };
   },
   async exposure({ name, bytes }) { return JSON.parse(photo_exposure(name, new Uint8Array(bytes))); },
+  async metadata({ bytes }) { return JSON.parse(photo_metadata(new Uint8Array(bytes))); },
   async circle({ name, bytes }) { return JSON.parse(detect_circle(name, new Uint8Array(bytes))); },
   async times({ listName, text, names }) { return Array.from(list_times(listName, text, names)); },
   async checkCamera({ name, json }) { return check_camera_profile(name, json); },
@@ -218,20 +268,19 @@ const handlers = {
     return JSON.parse(live_overlay(lens || '', JSON.stringify(circle || {}), model, fov, heading ?? NaN));
   },
   async sentence({ text }) { return sentence(text); },
+  async core() { return coreInfo; },
   async memory() {
     // The wasm linear memory never shrinks: its size is the high-water mark of the core.
     return { wasmBytes: wasmMemory() };
   },
 };
 
-let memoryRef = null;
 function wasmMemory() { return memoryRef ? memoryRef.buffer.byteLength : 0; }
 
 self.onmessage = async (e) => {
   const { id, type } = e.data;
   try {
-    const wasm = await ready;
-    memoryRef = wasm.memory;
+    await ready;
     const h = handlers[type];
     if (!h) throw new Error(`unknown request ${type}`);
     const result = await h.call({ id }, e.data);
@@ -242,6 +291,8 @@ self.onmessage = async (e) => {
       postMessage({ id, result });
     }
   } catch (err) {
-    postMessage({ id, error: sentenceOf(err) });
+    // The core names the kind of failure (skydome_web::WebError::kind) for the page's way out.
+    const kind = err && typeof err.name === 'string' && err.name !== 'Error' ? err.name : null;
+    postMessage({ id, error: sentenceOf(err), kind });
   }
 };
