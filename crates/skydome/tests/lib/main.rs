@@ -20,6 +20,7 @@ mod formats_rgbe;
 mod independent_readers;
 mod merge;
 mod noise_merge;
+mod oracle;
 mod pipeline;
 mod plot;
 mod render;
