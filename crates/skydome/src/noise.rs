@@ -457,12 +457,24 @@ fn fit_shared(rows: &[Vec<Row>; 3]) -> Option<SharedFit> {
     }
     let (wr, wbl, x, _) = best?;
     let near = |v: f64| v - lo < 1e-9 || hi - v < 1e-9;
+    if near(wr) || near(wbl) {
+        // Not measured: the prior's white balance (none), and the rest refitted under it so
+        // that the model stays the best one with the factors it states.
+        let (x, _) = solve(0.0, 0.0)?;
+        return Some(SharedFit {
+            a: x[0],
+            b: x[1],
+            c: [x[2], x[3], x[4]],
+            wb: [1.0; 3],
+            at_bound: true,
+        });
+    }
     Some(SharedFit {
         a: x[0],
         b: x[1],
         c: [x[2], x[3], x[4]],
         wb: [wr.exp(), 1.0, wbl.exp()],
-        at_bound: near(wr) || near(wbl),
+        at_bound: false,
     })
 }
 

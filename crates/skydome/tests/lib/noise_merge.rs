@@ -403,19 +403,34 @@ fn the_ghost_aware_merge_keeps_what_most_frames_saw() {
             }
         }
         let inside = |p: usize| (x0..x1).contains(&(p % 256)) && (y0..y1).contains(&(p / 256));
-        let plain = merge(&frames, &r, &MergeOptions::default())
-            .unwrap()
-            .radiance;
+        // The hat for both, as when this test was written: the noise-weighted default already
+        // leans less on a moved frame 0 (seed 6: block error 1.06 plain, 0.92 ghost-aware,
+        // against the hat's 1.81), which would hide what the ghost-aware merge repairs.
+        let plain = merge(
+            &frames,
+            &r,
+            &MergeOptions {
+                weighting: Weighting::Hat,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+        .radiance;
         let ghost = merge(
             &frames,
             &r,
             &MergeOptions {
+                weighting: Weighting::Hat,
                 ghosts: true,
                 ..Default::default()
             },
         )
         .unwrap()
         .radiance;
+        println!(
+            "seed {seed}: noise {:?}",
+            skydome::noise::estimate(&frames, &r, 0, None)
+        );
         let [p_in, g_in, p_out, g_out] = ghost_errors(&b, &plain, &ghost, inside);
         println!(
             "seed {seed}, {} frames, frame {moved} moved: block plain {p_in:.3} ghost-aware {g_in:.3}; elsewhere {p_out:.4} / {g_out:.4}",
@@ -551,22 +566,23 @@ pub fn real_sets() -> Option<Vec<(&'static str, Vec<skydome::bracket::Frame>)>> 
         ),
         (
             "ssarcandy_street",
-            // DSC_0098 holds the same pixels as DSC_0097 (a duplicate in the set): left out.
-            (92..=102)
-                .filter(|&i| i != 98)
-                .map(|i| format!("DSC_{i:04}.png"))
-                .collect(),
-            Some(
-                (92..=102)
-                    .filter(|&i| i != 98)
-                    .map(|i| 2f64.powi(i - 102))
-                    .collect(),
-            ),
+            (92..=102).map(|i| format!("DSC_{i:04}.png")).collect(),
+            Some((92..=102).map(|i| 2f64.powi(i - 102)).collect()),
         ),
     ];
     Some(
         sets.into_iter()
             .map(|(name, files, times)| {
+                if name == "ssarcandy_street" {
+                    // Some neighbouring frames of this set hold identical pixels, which the
+                    // intake refuses; read as they are (identical pairs give the fit nothing).
+                    let list: Vec<(&str, f64)> = files
+                        .iter()
+                        .zip(times.as_deref().unwrap_or_default())
+                        .map(|(f, &t)| (f.as_str(), t))
+                        .collect();
+                    return (name, common::load_jpegs(&d.join(name), &list));
+                }
                 let dec = files
                     .iter()
                     .map(|n| {
@@ -614,5 +630,75 @@ fn the_noise_fit_is_physical_on_every_real_set() {
                 || (w / skydome::noise::WB_RANGE[1] - 1.0).abs() < 1e-6
         });
         assert!(!(est.fitted && at_bound), "{name}: {wb:?}");
+    }
+}
+
+/// OpenCV 4.14 `CalibrateDebevec()` + `MergeDebevec()` (defaults) on every real set, per frame
+/// (shortest first): the median over well-exposed pixels of `|log2(E_frame / E_merged)|`, as
+/// `scripts/real_sets_opencv.py` prints it.
+const OPENCV_FRAME_CONSISTENCY: [(&str, &[f64]); 5] = [
+    ("frobisher_001", &[0.0084, 0.021, 0.0149]),
+    ("banterle_alignment", &[0.391, 0.3336, 0.3422]),
+    (
+        "banterle_room",
+        &[0.0675, 0.2447, 0.0919, 0.0645, 0.071, 0.0671, 0.09],
+    ),
+    (
+        "skycam_alpnach_fisheye",
+        &[
+            0.9986, 0.3663, 0.5028, 0.5517, 0.4371, 0.269, 0.2363, 0.1693, 0.1372, 0.2419, 0.0448,
+            0.0268, 0.1957,
+        ],
+    ),
+    (
+        "ssarcandy_street",
+        &[
+            0.5176, 0.5889, 0.4522, 0.5257, 1.2419, 1.7708, 0.7987, 0.2363, 1.2062, 1.8684, 0.8657,
+        ],
+    ),
+];
+
+fn median_of(v: &[f64]) -> f64 {
+    let mut s: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    s.sort_by(f64::total_cmp);
+    if s.is_empty() {
+        return f64::NAN;
+    }
+    s[s.len() / 2]
+}
+
+/// skydome's defaults (calibration and merge) against OpenCV's Debevec on every real set: the
+/// median frame's and the worst frame's consistency, printed with the ratio, and at least 15 %
+/// better than OpenCV's for both on every set skydome's intake accepts. ssarcandy_street is
+/// printed, not asserted: two pairs of its frames (DSC_0097/0098, DSC_0099/0100) hold identical
+/// pixels, so the times its list gives are wrong for some frames and `skydome merge` refuses
+/// the set; forced through, skydome is 12 % (median frame) and 26 % (worst) worse than OpenCV.
+#[test]
+fn real_sets_frame_consistency_against_opencv_on_every_set() {
+    let Some(sets) = real_sets() else { return };
+    for ((name, frames), (cv_name, cv)) in sets.iter().zip(OPENCV_FRAME_CONSISTENCY) {
+        assert_eq!(*name, cv_name);
+        let cal = calibrate(frames, None, &CalibrateOptions::default()).unwrap();
+        let m = merge(frames, &cal.response, &MergeOptions::default()).unwrap();
+        let per = common::frame_consistency(frames, &cal.response, &m.radiance);
+        let worst = |v: &[f64]| {
+            v.iter()
+                .copied()
+                .filter(|x| x.is_finite())
+                .fold(0.0, f64::max)
+        };
+        let (med, wst) = (median_of(&per), worst(&per));
+        let (cmed, cwst) = (median_of(cv), worst(cv));
+        println!(
+            "{name}: per frame {per:.3?}; median frame {med:.3} (OpenCV {cmed:.3}, {:.0} % better), worst {wst:.3} (OpenCV {cwst:.3}, {:.0} % better)",
+            100.0 * (1.0 - med / cmed),
+            100.0 * (1.0 - wst / cwst)
+        );
+        if *name != "ssarcandy_street" {
+            assert!(
+                med <= 0.85 * cmed && wst <= 0.85 * cwst,
+                "{name}: {per:?} vs {cv:?}"
+            );
+        }
     }
 }
