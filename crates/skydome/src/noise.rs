@@ -279,12 +279,11 @@ pub fn estimate(
     let lt: Vec<f64> = frames.iter().map(|f| f.exposure.relative().ln()).collect();
     let (mut total, mut total_bins) = (0usize, 0usize);
     let mut all_rows: [Vec<Row>; 3] = Default::default();
-    for c in 0..3 {
+    for (c, rows) in all_rows.iter_mut().enumerate() {
         let g = response.curve(c);
         let u: Vec<f64> = g.iter().map(|v| (-v).exp()).collect();
         let s: Vec<f64> = (0..LEVELS).map(|z| slope(g, z).powi(2)).collect();
         // Rows of the fit: regressors (Σu, Σu², Σs) and the measured variance, with a weight.
-        let rows = &mut all_rows[c];
         for j in 0..frames.len() - 1 {
             let mut bins: Vec<Vec<(u8, u8)>> = vec![Vec::new(); BINS];
             let (a, b) = (&frames[j].pixels, &frames[j + 1].pixels);
@@ -355,14 +354,13 @@ pub fn estimate(
     } else {
         fit.b.sqrt() * (if from_prior.gain { k } else { 1.0 / fit.a })
     };
-    let mut model = NoiseModel::default();
-    for c in 0..3 {
-        model.channels[c] = ChannelNoise {
+    let model = NoiseModel {
+        channels: std::array::from_fn(|c| ChannelNoise {
             electrons_at_gauge: k * wb[c],
             read_noise: rn,
             code_noise: (fit.c[c] - 1.0 / 12.0).max(0.0).sqrt(),
-        };
-    }
+        }),
+    };
     if !model.is_valid() {
         return fallback(total, total_bins);
     }

@@ -546,7 +546,8 @@ pub fn real_sets() -> Option<Vec<(&'static str, Vec<skydome::bracket::Frame>)>> 
         1.0 / 1000.0,
         1.0 / 4000.0,
     ];
-    let sets: Vec<(&str, Vec<String>, Option<Vec<f64>>)> = vec![
+    type Set = (&'static str, Vec<String>, Option<Vec<f64>>);
+    let sets: Vec<Set> = vec![
         (
             "frobisher_001",
             (2600..2603).map(|i| format!("IMG_{i}.jpg")).collect(),

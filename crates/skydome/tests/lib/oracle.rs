@@ -196,7 +196,7 @@ pub fn oracle(case: &Case) -> HdrImage {
                     continue;
                 }
                 let ze = b + (255.0 - b) * o.crf[c].forward(x.min(1.0));
-                if ze > 250.0 || ze < 1.0 {
+                if !(1.0..=250.0).contains(&ze) {
                     continue;
                 }
                 let h = 0.5;
@@ -289,10 +289,10 @@ fn offset_rmse(a: &HdrImage, truth: &HdrImage, mask: &[bool], scale: [(f64, f64)
     let mut s = 0f64;
     let mut k = 0usize;
     for (p, _) in mask.iter().enumerate().filter(|(_, &m)| m) {
-        for c in 0..3 {
+        for (c, sc) in scale.iter().enumerate() {
             let (v, t) = (a.data[3 * p + c] as f64, truth.data[3 * p + c] as f64);
             if v > 0.0 && t > 0.0 {
-                s += ((v / t).log2() - scale[c].0).powi(2);
+                s += ((v / t).log2() - sc.0).powi(2);
                 k += 1;
             }
         }
@@ -308,10 +308,10 @@ fn offset_rmse(a: &HdrImage, truth: &HdrImage, mask: &[bool], scale: [(f64, f64)
 fn median_offset(a: &HdrImage, truth: &HdrImage, mask: &[bool], scale: [(f64, f64); 3]) -> f64 {
     let mut d: Vec<f64> = Vec::new();
     for (p, _) in mask.iter().enumerate().filter(|(_, &m)| m) {
-        for c in 0..3 {
+        for (c, sc) in scale.iter().enumerate() {
             let (v, t) = (a.data[3 * p + c] as f64, truth.data[3 * p + c] as f64);
             if v > 0.0 && t > 0.0 {
-                d.push((v / t).log2() - scale[c].0);
+                d.push((v / t).log2() - sc.0);
             }
         }
     }
