@@ -37,10 +37,10 @@ pub struct Args {
     /// Also write the per-pixel confidence as a grey PNG (black = no frame well exposed).
     #[arg(long, value_name = "FILE.png")]
     pub confidence: Option<PathBuf>,
-    /// Frame weighting: `hat` (robust, default), `noise` (inverse variance under a camera
-    /// noise model estimated from the bracket or read from the profile) or `none` (the seed's
-    /// unweighted eq. 4).
-    #[arg(long, default_value = "hat", value_parser = parse_weighting)]
+    /// Frame weighting: `noise` (default: inverse variance under a camera noise model
+    /// estimated from the bracket or read from the profile), `hat` (Debevec's hat, the default
+    /// before issue 27; its output is unchanged) or `none` (the seed's unweighted eq. 4).
+    #[arg(long, default_value = "noise", value_parser = parse_weighting)]
     pub weighting: Weighting,
     /// A spot-meter reading that makes the radiance absolute: the luminance in cd/m² of the
     /// patch around pixel X,Y of the input photos (origin top-left).

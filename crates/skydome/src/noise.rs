@@ -29,12 +29,25 @@
 //! `a = 1/K`, `b = σ_r²/K²` and `c = 1/12 + σ_c²`. The differences are binned by `z₁` per frame
 //! pair and channel; each bin's variance is measured robustly (the median absolute deviation
 //! about the bin's median, which also removes any bias of the curve and ignores a minority of
-//! moving or misaligned pixels); `(a, b, c)` are fitted by non-negative least squares on the
-//! relative residuals of all bins. A channel whose best fit has no shot-noise term (downscaled
-//! or heavily compressed photos, such as banterle_room's) gets [`NO_SHOT_NOISE`] electrons;
-//! before, such a fit was refused and the phone-like default's weights were 21 % worse than the
-//! fitted ones on that set. With too few usable pixels the fit is refused and
-//! [`NoiseModel::default`] (a phone-like sensor) is used, and said so.
+//! moving or misaligned pixels).
+//!
+//! The three channels are one sensor: they share **one gain and one read noise**. Channel `c`
+//! collects `K_c = K · w_c` electrons at its code 128, where `w_c` (green = 1) is the
+//! white-balance factor the camera applied before its tone curve (a red channel amplified 2× by
+//! white balance reads code 128 at half the electrons); the read noise is `σ_r` electrons in
+//! every channel. So `a_c = a / w_c`, `b_c = b / w_c²` with `a = 1/K`, `b = σ_r²/K²`, and each
+//! channel keeps its own code-domain noise `c_c` (JPEG treats chroma differently). For given
+//! `(w_R, w_B)` the model is linear in `(a, b, c_R, c_G, c_B)`, fitted by non-negative least
+//! squares on the relative residuals of all bins of all channels; `(w_R, w_B)` are searched on
+//! a log grid within [`WB_RANGE`] (coarse, then two finer passes about the best).
+//!
+//! A parameter that ends **at a bound** is not measured: no shot noise (`a = 0`: downscaled,
+//! denoised or heavily compressed photos), no read noise (`b = 0`), a white-balance factor at
+//! the edge of [`WB_RANGE`]. It takes the prior's value ([`NoiseModel::default`]: 600 e⁻ at
+//! code 128, 3 e⁻ read noise, no white balance), [`NoiseEstimate::fitted`] is false and
+//! [`NoiseEstimate::from_prior`] says which. A code-domain noise of zero is not a bound but a
+//! measurement (lossless frames have quantisation only). With too few usable pixels the whole
+//! prior is used, and said so.
 //!
 //! ## Clipping
 //! A code of 0 or 255 is a bound, not a measurement; its weight is zero. Codes near full scale
@@ -50,6 +63,9 @@ pub const TOP_FADE: f64 = 12.0;
 /// `electrons_at_gauge` of a channel whose fit found no shot noise (see
 /// [`NoiseModel::upper_bound`]).
 pub const NO_SHOT_NOISE: f64 = 1e9;
+/// Range of the white-balance factors `w_R`, `w_B` (relative to green) [`estimate`] searches;
+/// a factor at either end is a bound (not measured).
+pub const WB_RANGE: [f64; 2] = [0.2, 5.0];
 /// Bins per frame pair and channel in [`estimate`].
 const BINS: usize = 20;
 /// Fewest differences in a bin for it to enter the fit.
@@ -137,17 +153,93 @@ fn slope(g: &[f64], z: usize) -> f64 {
     (g[hi] - g[lo]) / (hi - lo) as f64
 }
 
+/// Which parameters of a [`NoiseEstimate`] are the prior's ([`NoiseModel::default`]) because
+/// the fit could not measure them (it ended at a bound, or there was too little data).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub struct FromPrior {
+    /// The gain (electrons at code 128): no shot noise was measurable.
+    pub gain: bool,
+    /// The read noise: none was measurable.
+    pub read_noise: bool,
+    /// The white-balance factors: at the edge of [`WB_RANGE`], or undetermined without shot
+    /// and read noise.
+    pub white_balance: bool,
+    /// The code-domain noise (only when nothing was fitted at all).
+    pub code_noise: bool,
+}
+
+impl FromPrior {
+    /// Everything from the prior.
+    pub const ALL: Self = Self {
+        gain: true,
+        read_noise: true,
+        white_balance: true,
+        code_noise: true,
+    };
+
+    /// True when some parameter came from the prior.
+    pub fn any(&self) -> bool {
+        self.gain || self.read_noise || self.white_balance || self.code_noise
+    }
+
+    /// The parameters from the prior, named for a message ("gain, read noise").
+    pub fn names(&self) -> String {
+        [
+            (self.gain, "gain"),
+            (self.read_noise, "read noise"),
+            (self.white_balance, "white balance"),
+            (self.code_noise, "code noise"),
+        ]
+        .iter()
+        .filter(|(b, _)| *b)
+        .map(|(_, n)| *n)
+        .collect::<Vec<_>>()
+        .join(", ")
+    }
+}
+
 /// What [`estimate`] found.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct NoiseEstimate {
-    /// The model (the default when `fitted` is false).
+    /// The model: the fitted parameters, the prior's where [`from_prior`](Self::from_prior) says.
     pub model: NoiseModel,
     /// Pixel differences that entered the fit, all channels and frame pairs.
     pub differences: usize,
     /// Bins that entered the fit, all channels.
     pub bins: usize,
-    /// False when there were too few well-exposed pixel pairs and the default was used.
+    /// True when every parameter was measured: none ended at a bound and none is the prior's.
     pub fitted: bool,
+    /// White-balance factors `w_R, w_G, w_B` (green = 1): channel `c` collects
+    /// `K · w_c` electrons at its code 128 (see the module docs).
+    #[serde(default = "unit_wb")]
+    pub white_balance: [f64; 3],
+    /// Which parameters are the prior's.
+    #[serde(default)]
+    pub from_prior: FromPrior,
+}
+
+fn unit_wb() -> [f64; 3] {
+    [1.0; 3]
+}
+
+impl NoiseEstimate {
+    /// An estimate that is a given model (a camera profile's): every parameter counts as fitted.
+    pub fn given(model: NoiseModel) -> Self {
+        let g = model.channels[1].electrons_at_gauge;
+        Self {
+            model,
+            differences: 0,
+            bins: 0,
+            fitted: true,
+            white_balance: model.channels.map(|c| c.electrons_at_gauge / g),
+            from_prior: FromPrior::default(),
+        }
+    }
+
+    /// The channels' gains (electrons at code 128), red, green, blue.
+    pub fn gains(&self) -> [f64; 3] {
+        self.model.channels.map(|c| c.electrons_at_gauge)
+    }
 }
 
 /// Estimates the noise model from adjacent-frame differences (see the module docs). `frames`
@@ -165,6 +257,8 @@ pub fn estimate(
         differences,
         bins,
         fitted: false,
+        white_balance: [1.0; 3],
+        from_prior: FromPrior::ALL,
     };
     let Some(first) = frames.first() else {
         return fallback(0, 0);
@@ -183,15 +277,13 @@ pub fn estimate(
         return fallback(0, 0);
     }
     let lt: Vec<f64> = frames.iter().map(|f| f.exposure.relative().ln()).collect();
-    let mut model = NoiseModel::default();
     let (mut total, mut total_bins) = (0usize, 0usize);
-    let mut fitted_all = true;
-    for c in 0..3 {
+    let mut all_rows: [Vec<Row>; 3] = Default::default();
+    for (c, rows) in all_rows.iter_mut().enumerate() {
         let g = response.curve(c);
         let u: Vec<f64> = g.iter().map(|v| (-v).exp()).collect();
         let s: Vec<f64> = (0..LEVELS).map(|z| slope(g, z).powi(2)).collect();
         // Rows of the fit: regressors (Σu, Σu², Σs) and the measured variance, with a weight.
-        let mut rows: Vec<([f64; 3], f64, f64)> = Vec::new();
         for j in 0..frames.len() - 1 {
             let mut bins: Vec<Vec<(u8, u8)>> = vec![Vec::new(); BINS];
             let (a, b) = (&frames[j].pixels, &frames[j + 1].pixels);
@@ -232,28 +324,53 @@ pub fn estimate(
             }
         }
         total_bins += rows.len();
-        match fit_nonneg(&rows) {
-            Some([a, b, cc]) if rows.len() >= 4 && (a > 0.0 || b > 0.0 || cc > 0.0) => {
-                // No measurable shot noise (downscaled, denoised or heavily compressed
-                // photos): an electron count so large that the shot term vanishes.
-                let k = if a > 0.0 { 1.0 / a } else { NO_SHOT_NOISE };
-                model.channels[c] = ChannelNoise {
-                    electrons_at_gauge: k,
-                    read_noise: b.sqrt() * k,
-                    code_noise: (cc - 1.0 / 12.0).max(0.0).sqrt(),
-                };
-            }
-            _ => fitted_all = false,
-        }
     }
-    if !fitted_all || !model.is_valid() {
+    if all_rows.iter().any(|r| r.len() < 4) {
+        return fallback(total, total_bins);
+    }
+    let Some(fit) = fit_shared(&all_rows) else {
+        return fallback(total, total_bins);
+    };
+    let prior = NoiseModel::default().channels[1];
+    let from_prior = FromPrior {
+        gain: fit.a <= 0.0,
+        read_noise: fit.b <= 0.0,
+        white_balance: fit.at_bound || (fit.a <= 0.0 && fit.b <= 0.0),
+        code_noise: false,
+    };
+    let wb = if from_prior.white_balance {
+        [1.0; 3]
+    } else {
+        fit.wb
+    };
+    // Green's gain and read noise; the prior's where not measured.
+    let k = if from_prior.gain {
+        prior.electrons_at_gauge
+    } else {
+        1.0 / fit.a
+    };
+    let rn = if from_prior.read_noise {
+        prior.read_noise
+    } else {
+        fit.b.sqrt() * (if from_prior.gain { k } else { 1.0 / fit.a })
+    };
+    let model = NoiseModel {
+        channels: std::array::from_fn(|c| ChannelNoise {
+            electrons_at_gauge: k * wb[c],
+            read_noise: rn,
+            code_noise: (fit.c[c] - 1.0 / 12.0).max(0.0).sqrt(),
+        }),
+    };
+    if !model.is_valid() {
         return fallback(total, total_bins);
     }
     NoiseEstimate {
         model,
         differences: total,
         bins: total_bins,
-        fitted: true,
+        fitted: !from_prior.any(),
+        white_balance: wb,
+        from_prior,
     }
 }
 
@@ -276,40 +393,132 @@ pub(crate) fn median(v: &mut [f64]) -> f64 {
     v[k]
 }
 
-/// Non-negative least squares for three unknowns on rows `(r, var, weight)`: minimises
-/// `Σ weight² · (r·x / var − 1)²` subject to `x ≥ 0`, by trying every active set (seven, so
-/// exhaustive search is simpler and exact). `None` when no subset gives a solution.
-fn fit_nonneg(rows: &[([f64; 3], f64, f64)]) -> Option<[f64; 3]> {
-    let mut best: Option<([f64; 3], f64)> = None;
-    for set in 1u8..8 {
-        let idx: Vec<usize> = (0..3).filter(|k| set & (1 << k) != 0).collect();
-        let m = idx.len();
-        let mut ata = vec![0f64; m * m];
-        let mut atb = vec![0f64; m];
-        for (r, var, wt) in rows {
-            let w2 = wt * wt;
-            for (i, &ki) in idx.iter().enumerate() {
-                let ai = r[ki] / var;
-                atb[i] += w2 * ai;
-                for (k, &kk) in idx.iter().enumerate() {
-                    ata[i * m + k] += w2 * ai * r[kk] / var;
-                }
+/// A row of the noise fit: regressors `(Σu, Σu², Σs)` averaged over a bin, the bin's measured
+/// variance, and the row's weight.
+type Row = ([f64; 3], f64, f64);
+
+/// The shared-sensor fit (see the module docs).
+struct SharedFit {
+    /// `1/K` of green.
+    a: f64,
+    /// `σ_r²/K²` of green.
+    b: f64,
+    /// `1/12 + σ_c²` per channel.
+    c: [f64; 3],
+    /// White-balance factors (green = 1).
+    wb: [f64; 3],
+    /// A white-balance factor is at the edge of [`WB_RANGE`].
+    at_bound: bool,
+}
+
+/// Fits `(a, b, c_R, c_G, c_B)` for the white-balance factors on a log grid, keeping the best.
+fn fit_shared(rows: &[Vec<Row>; 3]) -> Option<SharedFit> {
+    let (lo, hi) = (WB_RANGE[0].ln(), WB_RANGE[1].ln());
+    let solve = |wr: f64, wbl: f64| -> Option<([f64; 5], f64)> {
+        let w = [wr.exp(), 1.0, wbl.exp()];
+        let mut flat: Vec<([f64; 5], f64, f64)> = Vec::new();
+        for (c, rs) in rows.iter().enumerate() {
+            for (r, var, wt) in rs {
+                let mut x = [0f64; 5];
+                x[0] = r[0] / w[c];
+                x[1] = r[1] / (w[c] * w[c]);
+                x[2 + c] = r[2];
+                flat.push((x, *var, *wt));
             }
         }
-        let Some(sol) = solve_small(&mut ata, &mut atb, m) else {
+        fit_nonneg_n(&flat)
+    };
+    let mut best: Option<(f64, f64, [f64; 5], f64)> = None;
+    let consider = |wr: f64, wbl: f64, best: &mut Option<(f64, f64, [f64; 5], f64)>| {
+        if let Some((x, res)) = solve(wr.clamp(lo, hi), wbl.clamp(lo, hi)) {
+            if best.is_none_or(|b| res < b.3) {
+                *best = Some((wr.clamp(lo, hi), wbl.clamp(lo, hi), x, res));
+            }
+        }
+    };
+    const STEPS: usize = 16;
+    let step = (hi - lo) / STEPS as f64;
+    for i in 0..=STEPS {
+        for k in 0..=STEPS {
+            consider(lo + i as f64 * step, lo + k as f64 * step, &mut best);
+        }
+    }
+    let mut h = step;
+    for _ in 0..3 {
+        let (cr, cb, _, _) = best?;
+        h /= 4.0;
+        for i in -4..=4 {
+            for k in -4..=4 {
+                consider(cr + i as f64 * h, cb + k as f64 * h, &mut best);
+            }
+        }
+    }
+    let (wr, wbl, x, _) = best?;
+    let near = |v: f64| v - lo < 1e-9 || hi - v < 1e-9;
+    if near(wr) || near(wbl) {
+        // Not measured: the prior's white balance (none), and the rest refitted under it so
+        // that the model stays the best one with the factors it states.
+        let (x, _) = solve(0.0, 0.0)?;
+        return Some(SharedFit {
+            a: x[0],
+            b: x[1],
+            c: [x[2], x[3], x[4]],
+            wb: [1.0; 3],
+            at_bound: true,
+        });
+    }
+    Some(SharedFit {
+        a: x[0],
+        b: x[1],
+        c: [x[2], x[3], x[4]],
+        wb: [wr.exp(), 1.0, wbl.exp()],
+        at_bound: false,
+    })
+}
+
+/// Non-negative least squares for five unknowns (exhaustive over the 31 active sets, as
+/// [`fit_nonneg`]): the solution and its residual.
+fn fit_nonneg_n(rows: &[([f64; 5], f64, f64)]) -> Option<([f64; 5], f64)> {
+    const N: usize = 5;
+    // Normal equations of the full problem once; each active set takes its sub-matrix.
+    let mut ata = [[0f64; N]; N];
+    let mut atb = [0f64; N];
+    for (r, var, wt) in rows {
+        let w2 = wt * wt;
+        for i in 0..N {
+            let ai = r[i] / var;
+            atb[i] += w2 * ai;
+            for k in 0..N {
+                ata[i][k] += w2 * ai * r[k] / var;
+            }
+        }
+    }
+    let mut best: Option<([f64; N], f64)> = None;
+    for set in 1u8..(1 << N) {
+        let idx: Vec<usize> = (0..N).filter(|k| set & (1 << k) != 0).collect();
+        let m = idx.len();
+        let mut a = vec![0f64; m * m];
+        let mut b = vec![0f64; m];
+        for (i, &ki) in idx.iter().enumerate() {
+            b[i] = atb[ki];
+            for (k, &kk) in idx.iter().enumerate() {
+                a[i * m + k] = ata[ki][kk];
+            }
+        }
+        let Some(sol) = solve_small(&mut a, &mut b, m) else {
             continue;
         };
         if sol.iter().any(|&v| !(v.is_finite() && v >= 0.0)) {
             continue;
         }
-        let mut x = [0f64; 3];
+        let mut x = [0f64; N];
         for (i, &ki) in idx.iter().enumerate() {
             x[ki] = sol[i];
         }
         let res: f64 = rows
             .iter()
             .map(|(r, var, wt)| {
-                let pred = r[0] * x[0] + r[1] * x[1] + r[2] * x[2];
+                let pred: f64 = r.iter().zip(&x).map(|(a, b)| a * b).sum();
                 (wt * (pred / var - 1.0)).powi(2)
             })
             .sum();
@@ -317,10 +526,10 @@ fn fit_nonneg(rows: &[([f64; 3], f64, f64)]) -> Option<[f64; 3]> {
             best = Some((x, res));
         }
     }
-    best.map(|(x, _)| x)
+    best
 }
 
-/// Gaussian elimination with partial pivoting on an `m × m` system (m ≤ 3).
+/// Gaussian elimination with partial pivoting on an `m × m` system (m ≤ 5).
 fn solve_small(a: &mut [f64], b: &mut [f64], m: usize) -> Option<Vec<f64>> {
     for col in 0..m {
         let piv =
@@ -354,16 +563,23 @@ mod tests {
 
     #[test]
     fn nonnegative_fit_recovers_exact_parameters() {
-        let truth = [2e-3, 1e-5, 0.3];
-        let rows: Vec<([f64; 3], f64, f64)> = (1..30)
+        let truth = [2e-3, 1e-5, 0.3, 0.0, 0.1];
+        let rows: Vec<([f64; 5], f64, f64)> = (1..30)
             .map(|k| {
-                let r = [1.0 / k as f64, 1.0 / (k * k) as f64, 0.01 * k as f64];
-                let var = r[0] * truth[0] + r[1] * truth[1] + r[2] * truth[2];
+                let kf = k as f64;
+                let r = [
+                    1.0 / kf,
+                    1.0 / (kf * kf),
+                    0.01 * kf,
+                    0.02 * kf,
+                    0.5 + 0.01 * kf * kf,
+                ];
+                let var: f64 = r.iter().zip(&truth).map(|(a, b)| a * b).sum();
                 (r, var, 1.0)
             })
             .collect();
-        let x = fit_nonneg(&rows).unwrap();
-        for k in 0..3 {
+        let (x, _) = fit_nonneg_n(&rows).unwrap();
+        for k in 0..5 {
             assert!((x[k] - truth[k]).abs() < 1e-9 * (1.0 + truth[k]), "{x:?}");
         }
     }

@@ -256,6 +256,27 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthBracket, SynthError> {
 /// `k = 0.25 / base_time_s`, so `L = 4` fills it at the base time. Scale `truth` first to
 /// place the scene in the bracket. Frames come shortest exposure first.
 pub fn photograph(truth: &HdrImage, opts: &SynthOptions) -> Result<Vec<Frame>, SynthError> {
+    photograph_bits(truth, opts, false)
+}
+
+/// As [`photograph`], but 16-bit lossless frames: the code is `round(257 · (b + (255 − b) ·
+/// f(X)))` on the 0..=65535 scale (a 16-bit value `257 · z` is the 8-bit code `z`). JPEG cannot
+/// hold 16 bits, so `opts.jpeg_quality` must be `None`. The true `g` at a 16-bit value `v` is
+/// `ln f⁻¹(max(v/257 − b, ½)/(255 − b))`.
+pub fn photograph_16bit(truth: &HdrImage, opts: &SynthOptions) -> Result<Vec<Frame>, SynthError> {
+    if opts.jpeg_quality.is_some() {
+        return Err(SynthError::BadOption(
+            "16-bit frames cannot be JPEG: set jpeg_quality = None".into(),
+        ));
+    }
+    photograph_bits(truth, opts, true)
+}
+
+fn photograph_bits(
+    truth: &HdrImage,
+    opts: &SynthOptions,
+    sixteen: bool,
+) -> Result<Vec<Frame>, SynthError> {
     check(&SynthOptions {
         width: truth.width.clamp(16, 16384),
         height: truth.height.clamp(16, 16384),
@@ -271,6 +292,7 @@ pub fn photograph(truth: &HdrImage, opts: &SynthOptions) -> Result<Vec<Frame>, S
         let t = opts.base_time_s * ev.exp2();
         let gain = t * k;
         let mut codes = Vec::with_capacity(truth.data.len());
+        let mut codes16 = Vec::with_capacity(if sixteen { truth.data.len() } else { 0 });
         for (i, &l) in truth.data.iter().enumerate() {
             let x = l as f64 * gain;
             let mut e = x * opts.full_well;
@@ -282,7 +304,25 @@ pub fn photograph(truth: &HdrImage, opts: &SynthOptions) -> Result<Vec<Frame>, S
             let xn = e / opts.full_well;
             let v = opts.crf[i % 3].forward(xn.clamp(0.0, 1.0));
             let b = opts.black_level;
-            codes.push((b + (255.0 - b) * v).round().clamp(0.0, 255.0) as u8);
+            if sixteen {
+                codes16.push((257.0 * (b + (255.0 - b) * v)).round().clamp(0.0, 65535.0) as u16);
+            } else {
+                codes.push((b + (255.0 - b) * v).round().clamp(0.0, 255.0) as u8);
+            }
+        }
+        if sixteen {
+            frames.push(Frame {
+                name: format!("synth16_ev{ev:+}.png"),
+                width: w,
+                height: h,
+                pixels: Pixels::U16(codes16),
+                exposure: Exposure {
+                    time_s: t,
+                    iso: None,
+                    f_number: None,
+                },
+            });
+            continue;
         }
         let (codes, ext) = match opts.jpeg_quality {
             Some(q) => (jpeg_round_trip(&codes, w, h, q)?, "jpg"),
@@ -353,6 +393,20 @@ fn fbm(seed: u64, x: f64, y: f64) -> f64 {
 /// The true radiance map (see the module docs). With `circle = None` the projection still uses
 /// the frame's inscribed circle, but every pixel is scene: the corners, beyond 117.5°, are ground.
 pub fn scene(width: usize, height: usize, seed: u64, circle: Option<Circle>) -> HdrImage {
+    scene_with_sun(width, height, seed, circle, 45.0, 2.3)
+}
+
+/// As [`scene`] with the sun's disc centred at zenith angle `sun_zenith_deg` (degrees, 0 =
+/// image centre) and image angle `sun_angle_rad` (radians, measured from the +x axis towards
+/// +y, pixel origin top-left). [`scene`] uses 45° and 2.3 rad.
+pub fn scene_with_sun(
+    width: usize,
+    height: usize,
+    seed: u64,
+    circle: Option<Circle>,
+    sun_zenith_deg: f64,
+    sun_angle_rad: f64,
+) -> HdrImage {
     let mut img = HdrImage::new(width, height);
     let c = circle.unwrap_or(Circle {
         cx: width as f64 / 2.0,
@@ -361,8 +415,7 @@ pub fn scene(width: usize, height: usize, seed: u64, circle: Option<Circle>) -> 
     });
     let deg = std::f64::consts::PI / 180.0;
     let max_theta = 117.5 * deg;
-    // Sun at zenith angle 45°, image direction up-left (azimuth is not the point here).
-    let (sun_theta, sun_phi) = (45.0 * deg, 2.3f64);
+    let (sun_theta, sun_phi) = (sun_zenith_deg * deg, sun_angle_rad);
     let sun = [
         sun_theta.sin() * sun_phi.cos(),
         sun_theta.sin() * sun_phi.sin(),

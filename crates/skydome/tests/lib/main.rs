@@ -28,6 +28,7 @@ mod fuzz_corpus;
 mod independent_readers;
 mod merge;
 mod noise_merge;
+mod oracle;
 mod pipeline;
 mod plot;
 mod render;
