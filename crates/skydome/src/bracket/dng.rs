@@ -619,7 +619,7 @@ fn lossless_jpeg(data: &[u8], cw: usize, ch: usize, spp: usize) -> Result<Vec<u1
     let want = cw * ch * spp;
     if samples.len() < want {
         // The last strip of an image may be short.
-        if samples.len() % (cw * spp) != 0 || samples.is_empty() {
+        if !samples.len().is_multiple_of(cw * spp) || samples.is_empty() {
             return Err(format!(
                 "DNG lossless JPEG holds {} samples, {want} expected",
                 samples.len()

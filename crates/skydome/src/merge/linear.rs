@@ -281,8 +281,8 @@ pub fn merge_linear(
     for k in 0..n {
         let (x, y) = (k % w, k / w);
         for c in 0..3 {
-            for j in 0..p {
-                vals[j] = raw_value(src[j][3 * k + c]);
+            for (v, s) in vals.iter_mut().zip(&src) {
+                *v = raw_value(s[3 * k + c]);
             }
             let Some(first) = (0..p).find(|&j| vals[j].is_some()) else {
                 // Clipped in every frame: the shortest frame's lower bound.
@@ -297,8 +297,8 @@ pub fn merge_linear(
             let mut sw = 0f32;
             for _ in 0..2 {
                 let (mut num, mut den) = (0f32, 0f32);
-                for j in 0..p {
-                    let Some(v) = vals[j] else { continue };
+                for (j, v) in vals.iter().enumerate() {
+                    let Some(v) = *v else { continue };
                     if !usable(j, e) {
                         continue;
                     }

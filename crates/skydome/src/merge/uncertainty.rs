@@ -99,7 +99,7 @@ pub fn standard_error(
         let flagged = clipped.is_some_and(|m| m.get(k).is_some_and(|&f| f != 0));
         for c in 0..3 {
             let e = radiance.data[3 * k + c];
-            if flagged || !(e > 0.0) || !e.is_finite() {
+            if flagged || e.is_nan() || e <= 0.0 || e.is_infinite() {
                 out[3 * k + c] = f32::INFINITY;
                 continue;
             }

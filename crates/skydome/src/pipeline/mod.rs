@@ -169,11 +169,14 @@ pub fn run(
         &radiance,
         marks.as_ref(),
         &merged,
-        sigma.as_ref(),
-        lens_circle.as_ref(),
         &br,
         &mut progress,
     )?;
+    // The standard error in false colour, in the input photos' pixels (as the float map).
+    let confidence = sigma
+        .as_ref()
+        .map(|s| crate::plot::standard_error_picture(s, lens_circle.as_ref(), 150))
+        .transpose()?;
     let (equirect, angular, geometry, sky_warnings) = match sky.map(|s| sky_maps(s, &meta)) {
         Some(m) => (m.equirect, m.angular, Some(m.report), m.warnings),
         None => (None, None, None, Vec::new()),
@@ -230,7 +233,7 @@ pub fn run(
         preview: pictures.preview,
         overlay: pictures.overlay,
         marks,
-        confidence: pictures.confidence,
+        confidence,
         standard_error: sigma,
         consistency: pictures.consistency,
         camera_profile,
@@ -516,19 +519,16 @@ fn photometry_warning(p: Option<&PhotometryReport>, sun_from_reading: bool) -> O
 struct Pictures {
     preview: Option<RgbImage<u8>>,
     overlay: Option<RgbImage<u8>>,
-    confidence: Option<RgbImage<u8>>,
     consistency: Option<RgbImage<u8>>,
 }
 
-/// The pictures stage: the merge's consistency and confidence pictures (in the input photos'
+/// The pictures stage: the merge's consistency picture (in the input photos'
 /// pixels), the preview and the overlay of the final dome; nothing unrequested is computed.
 fn pictures_stage(
     options: &Options,
     radiance: &HdrImage,
     marks: Option<&OverlayMarks>,
     merged: &Merged,
-    sigma: Option<&HdrImage>,
-    lens_circle: Option<&Circle>,
     br: &Bracket,
     progress: &mut Reporter<'_>,
 ) -> Result<Pictures, PipelineError> {
@@ -540,10 +540,6 @@ fn pictures_stage(
             Some(grey_picture(w, h, &v)?)
         }
         _ => None,
-    };
-    let confidence = match sigma {
-        Some(s) => Some(crate::plot::standard_error_picture(s, lens_circle, 150)?),
-        None => None,
     };
     progress.at(Stage::Pictures, 0.0)?;
     let preview = match products.preview {
@@ -558,7 +554,6 @@ fn pictures_stage(
     Ok(Pictures {
         preview,
         overlay,
-        confidence,
         consistency,
     })
 }

@@ -339,9 +339,7 @@ fn malformed_dngs_give_one_line_errors() {
     // Bad tags: the CFA pattern names a fourth colour; the white level is below black.
     let patch = |tag: u16, value: u16| -> Vec<u8> {
         let mut b = good.clone();
-        let n = u16::from_le_bytes([b[8], b[9]]) as usize;
         let ifd = u32::from_le_bytes([b[4], b[5], b[6], b[7]]) as usize;
-        let _ = n;
         let count = u16::from_le_bytes([b[ifd], b[ifd + 1]]) as usize;
         for i in 0..count {
             let e = ifd + 2 + 12 * i;
