@@ -99,11 +99,11 @@ pub fn with_standard_error(
         if worst.is_finite() {
             stated.push(f64::from(worst));
         }
-        for c in 0..3 {
+        for (c, &sc) in s.iter().enumerate() {
             let (x, y) = (a.data[3 * p + c], b.data[3 * p + c]);
-            if ok(x) && ok(y) && s[c].is_finite() && s[c] > 0.0 {
+            if ok(x) && ok(y) && sc.is_finite() && sc > 0.0 {
                 let e = (f64::from(x) * report.scale[c] / f64::from(y)).log2();
-                ratio.push(e.abs() / f64::from(s[c]));
+                ratio.push(e.abs() / f64::from(sc));
             }
         }
     }

@@ -760,6 +760,7 @@ mod tests {
     use super::*;
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn inverse_of_a_matrix_times_itself_is_identity() {
         let m = [[2.0, 1.0, 0.5], [0.3, 1.5, 0.2], [0.1, 0.4, 3.0]];
         let i = invert3(&m).unwrap();

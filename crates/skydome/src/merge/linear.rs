@@ -136,7 +136,7 @@ pub fn estimate_linear_noise(frames: &[Frame], colour: &RawColour) -> LinearNois
     let mut fitted = [false; 3];
     for c in 0..3 {
         // (level v₂ · (1 + r), 1 + r², variance) per bin, over all frame pairs.
-        let mut rows: Vec<(f64, f64, f64, usize)> = Vec::new();
+        let mut rows: Vec<BinRow> = Vec::new();
         for j in 0..src.len().saturating_sub(1) {
             let (s1, s2) = (src[j], src[j + 1]);
             let pairs = |k: usize| -> Option<(f32, f32)> {
@@ -213,9 +213,13 @@ pub fn estimate_linear_noise(frames: &[Frame], colour: &RawColour) -> LinearNois
     out
 }
 
+/// One bin of the noise fit: the regressors `x = v₂ (1 + r)` and `y = 1 + r²`, the measured
+/// variance and the number of differences.
+type BinRow = (f64, f64, f64, usize);
+
 /// Non-negative weighted least squares of `var = a · x + b · y` on relative residuals.
-fn fit_ab(rows: &[(f64, f64, f64, usize)]) -> Option<(f64, f64)> {
-    let solve = |wts: &dyn Fn(&(f64, f64, f64, usize)) -> f64| -> Option<(f64, f64)> {
+fn fit_ab(rows: &[BinRow]) -> Option<(f64, f64)> {
+    let solve = |wts: &dyn Fn(&BinRow) -> f64| -> Option<(f64, f64)> {
         let (mut sxx, mut sxy, mut syy, mut sxv, mut syv) = (0.0, 0.0, 0.0, 0.0, 0.0);
         for r in rows {
             let w = wts(r);
