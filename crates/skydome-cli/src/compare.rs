@@ -18,6 +18,10 @@ pub struct Args {
     /// Fit one scale per channel instead of one for all three.
     #[arg(long)]
     pub per_channel: bool,
+    /// A's standard-error map (`skydome merge --confidence se.exr`): also report its median
+    /// and the error in units of it (0.674 when the stated error is honest).
+    #[arg(long, value_name = "SE.exr")]
+    pub sigma: Option<PathBuf>,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -44,7 +48,7 @@ pub fn run(a: Args) -> Result<()> {
             .map(|p| c.contains_pixel(p % ia.width, p / ia.width))
             .collect()
     });
-    let r = compare::compare(
+    let mut r = compare::compare(
         ia,
         ib,
         mask.as_deref(),
@@ -53,6 +57,11 @@ pub fn run(a: Args) -> Result<()> {
         },
     )
     .with_context(|| format!("{} vs {}", a.a.display(), a.b.display()))?;
+    if let Some(p) = &a.sigma {
+        let se = crate::radiance::read(p)?;
+        compare::with_standard_error(&mut r, ia, ib, &se.image, mask.as_deref())
+            .with_context(|| format!("{}", p.display()))?;
+    }
     if a.json {
         crate::out(&serde_json::to_string_pretty(&r)?);
     } else {
@@ -70,6 +79,11 @@ pub fn run(a: Args) -> Result<()> {
             100.0 * r.p95_rel_error,
             r.log2_rmse
         ));
+        if let (Some(s), Some(z)) = (r.median_standard_error_stops, r.median_error_in_sigmas) {
+            crate::out(&format!(
+                "stated std error {s:.4} stops (median)\nerror / std error {z:.3} (median; 0.674 if the stated error is honest)"
+            ));
+        }
     }
     Ok(())
 }

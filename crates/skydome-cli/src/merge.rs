@@ -34,8 +34,11 @@ pub struct Args {
     /// Also write a tone-mapped preview (.jpg or .png).
     #[arg(long, value_name = "FILE")]
     pub preview: Option<PathBuf>,
-    /// Also write the per-pixel confidence as a grey PNG (black = no frame well exposed).
-    #[arg(long, value_name = "FILE.png")]
+    /// Also write the per-pixel standard error of the radiance in stops, from the noise
+    /// model: `.exr` writes the float map (per channel; +inf where the bracket did not
+    /// measure), `.png`/`.jpg` a false-colour picture with its scale bar (magenta = not
+    /// measured). In the input photos' pixels.
+    #[arg(long, value_name = "FILE.png|FILE.exr")]
     pub confidence: Option<PathBuf>,
     /// Frame weighting: `noise` (default: inverse variance under a camera noise model
     /// estimated from the bracket or read from the profile), `hat` (Debevec's hat, the default
@@ -213,9 +216,19 @@ fn encode(a: &Args, dome: &Dome) -> Result<Outputs> {
             out.add(p, radiance(p, img, meta)?);
         }
     }
+    if let (Some(p), Some(sigma)) = (&a.confidence, &dome.standard_error) {
+        let is_exr = p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+        if is_exr {
+            out.add(
+                p,
+                radiance(p, sigma, &skydome::formats::HdrMeta::default())?,
+            );
+        } else if let Some(img) = &dome.confidence {
+            out.add(p, crate::pictures::encode_rgb8(p, img)?);
+        }
+    }
     let pictures = [
         (&a.preview, &dome.preview),
-        (&a.confidence, &dome.confidence),
         (&a.consistency, &dome.consistency),
         (&a.maps.overlay, &dome.overlay),
     ];
@@ -317,6 +330,26 @@ fn print_summary(r: &Report, written: &[String]) {
         crate::out(&format!(
             "frames disagree beyond their noise at {:.2} % of the pixels",
             100.0 * f
+        ));
+    }
+    if let Some(raw) = &r.raw {
+        let fw = raw.noise.full_well_electrons();
+        let rn = raw.noise.read_noise_electrons();
+        crate::out(&format!(
+            "RAW: {} demosaic, colour from {}, noise {} ({:.0} e- at white, read noise {:.1} e-, green)",
+            raw.demosaic,
+            raw.colour.matrix_from,
+            if raw.noise.fitted { "fitted on the frames" } else { "assumed" },
+            fw[1],
+            rn[1]
+        ));
+    }
+    if let Some(e) = &r.standard_error {
+        crate::out(&format!(
+            "standard error: median {:.3} stops, 90th percentile {:.3}; {:.2} % not measured",
+            e.median_stops,
+            e.p90_stops,
+            100.0 * e.unmeasured_fraction
         ));
     }
     for w in written {

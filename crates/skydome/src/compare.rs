@@ -60,6 +60,60 @@ pub struct CompareReport {
     pub p95_rel_error: f64,
     /// RMS of the log2 ratio after scaling, in stops.
     pub log2_rmse: f64,
+    /// With `a`'s standard-error map ([`with_standard_error`]): the median over the compared
+    /// pixels of its stated standard error (largest channel), stops.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub median_standard_error_stops: Option<f64>,
+    /// With `a`'s standard-error map: the median of `|log2(s·a / b)| / σ` over the compared
+    /// values with a finite σ — 0.674 when the stated error is honest and `b` is exact, larger
+    /// when `a` is worse than it says.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub median_error_in_sigmas: Option<f64>,
+}
+
+/// Adds to `report` (from [`compare`] of `a` against `b` inside `mask`) what `a`'s
+/// standard-error map `sigma` (stops per channel, `+∞` = not measured; see
+/// [`crate::merge::standard_error`]) says: its median, and the actual error in units of it.
+pub fn with_standard_error(
+    report: &mut CompareReport,
+    a: &HdrImage,
+    b: &HdrImage,
+    sigma: &HdrImage,
+    mask: Option<&[bool]>,
+) -> Result<(), CompareError> {
+    let np = a.pixel_count();
+    if sigma.width != a.width || sigma.height != a.height || sigma.data.len() != 3 * np {
+        return Err(CompareError::SizeMismatch(
+            a.width,
+            a.height,
+            sigma.width,
+            sigma.height,
+            mask.map_or(np, <[bool]>::len),
+        ));
+    }
+    let ok = |v: f32| v.is_finite() && v > 0.0;
+    let (mut stated, mut ratio) = (Vec::new(), Vec::new());
+    for p in (0..np).filter(|&p| mask.is_none_or(|m| m.get(p) == Some(&true))) {
+        let s = &sigma.data[3 * p..3 * p + 3];
+        let worst = s.iter().copied().fold(0f32, f32::max);
+        if worst.is_finite() {
+            stated.push(f64::from(worst));
+        }
+        for (c, &sc) in s.iter().enumerate() {
+            let (x, y) = (a.data[3 * p + c], b.data[3 * p + c]);
+            if ok(x) && ok(y) && sc.is_finite() && sc > 0.0 {
+                let e = (f64::from(x) * report.scale[c] / f64::from(y)).log2();
+                ratio.push(e.abs() / f64::from(sc));
+            }
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied()
+    };
+    report.median_standard_error_stops = median(&mut stated);
+    report.median_error_in_sigmas = median(&mut ratio);
+    Ok(())
 }
 
 /// Compares `a` against the reference `b` inside `mask` (row-major, one entry per pixel).
@@ -159,6 +213,8 @@ pub fn compare(
         median_rel_error: pct(0.5),
         p95_rel_error: pct(0.95),
         log2_rmse: (l2 / m).sqrt(),
+        median_standard_error_stops: None,
+        median_error_in_sigmas: None,
     })
 }
 

@@ -711,7 +711,51 @@ pub fn false_colour(img: &HdrImage, opts: &FalseColour) -> Result<RgbImage<u8>, 
         }
     }
     if bar > 0 {
-        draw_colour_bar(&mut out, img.width, lo, hi, opts.scale.is_some())?;
+        let label = match opts.scale.is_some() {
+            true => "L (cd/m²)",
+            false => "L (relative)",
+        };
+        draw_colour_bar(&mut out, img.width, lo, hi, label)?;
+    }
+    Ok(out)
+}
+
+/// The bar range of [`standard_error_picture`], stops.
+pub const STANDARD_ERROR_RANGE: (f64, f64) = (0.005, 2.0);
+/// The colour of pixels the bracket did not measure in [`standard_error_picture`] (magenta).
+pub const UNMEASURED: [u8; 3] = [255, 0, 255];
+
+/// A false-colour picture of a standard-error map (per pixel and channel, stops; see
+/// [`crate::merge::standard_error`]): each pixel's largest channel error on the ramp of
+/// [`false_colour_ramp`], logarithmic over [`STANDARD_ERROR_RANGE`] (dark blue = well
+/// measured, white = 2 stops or worse), pixels not measured (`+∞`) in [`UNMEASURED`] magenta,
+/// outside `mask` black; a labelled colour bar on the right (`bar_width` pixels, 0 = none).
+pub fn standard_error_picture(
+    sigma: &HdrImage,
+    mask: Option<&Circle>,
+    bar_width: usize,
+) -> Result<RgbImage<u8>, PlotError> {
+    let (lo, hi) = STANDARD_ERROR_RANGE;
+    let (llo, lhi) = (lo.log10(), hi.log10());
+    let out_w = sigma.width + bar_width;
+    let out_h = sigma.height.max(if bar_width > 0 { 300 } else { 0 });
+    let mut out = RgbImage::<u8>::new(out_w, out_h);
+    for y in 0..sigma.height {
+        let (x0, x1) = tonemap::row_span(mask, sigma.width, y);
+        for x in x0..x1 {
+            let k = 3 * (y * sigma.width + x);
+            let s = sigma.data[k..k + 3].iter().copied().fold(0f32, f32::max);
+            let c = if s.is_finite() {
+                let t = (f64::from(s).max(lo).log10() - llo) / (lhi - llo);
+                false_colour_ramp(t)
+            } else {
+                UNMEASURED
+            };
+            out.set_pixel(x, y, c);
+        }
+    }
+    if bar_width > 0 {
+        draw_colour_bar(&mut out, sigma.width, lo, hi, "σ (stops)")?;
     }
     Ok(out)
 }
@@ -721,7 +765,7 @@ fn draw_colour_bar(
     x_start: usize,
     lo: f64,
     hi: f64,
-    absolute: bool,
+    label: &str,
 ) -> Result<(), PlotError> {
     let (w, h) = (out.width as u32, out.height as u32);
     let bar_w = out.width - x_start;
@@ -791,11 +835,6 @@ fn draw_colour_bar(
             HPos::Left,
             VPos::Top,
         ));
-    let label = if absolute {
-        "L (cd/m²)"
-    } else {
-        "L (relative)"
-    };
     root.draw_text(label, &title, (x0 as i32, (fs * 0.6) as i32))
         .map_err(draw_err)?;
     root.present().map_err(draw_err)?;

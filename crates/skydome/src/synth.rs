@@ -503,3 +503,173 @@ mod tests {
         assert!(generate(&o).is_err());
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// RAW (DNG) brackets
+// ---------------------------------------------------------------------------------------------
+
+/// XYZ → linear sRGB (D65): as a DNG `ColorMatrix` (illuminant D65) it makes camera RGB equal
+/// Rec.709, so a synthetic RAW bracket's truth compares directly with the merged radiance.
+pub const XYZ_TO_REC709: [f64; 9] = [
+    3.240_454_2,
+    -1.537_138_5,
+    -0.498_531_4,
+    -0.969_266_0,
+    1.876_010_8,
+    0.041_556_0,
+    0.055_643_4,
+    -0.204_025_9,
+    1.057_225_2,
+];
+
+/// The camera of [`raw_bracket`]: a Bayer sensor written as uncompressed DNG.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawSynthOptions {
+    /// Exposure offsets in stops (EV) from `base_time_s`, any order; frames come shortest first.
+    pub evs: Vec<f64>,
+    /// Shutter time at EV 0, seconds.
+    pub base_time_s: f64,
+    /// Seed of the noise.
+    pub seed: u64,
+    /// Electrons at the white level.
+    pub full_well: f64,
+    /// Read noise, electrons r.m.s.
+    pub read_noise: f64,
+    /// Black and white level, raw units (white ≤ 65535).
+    pub black: u16,
+    /// White level.
+    pub white: u16,
+    /// The 2 × 2 CFA pattern (0 R, 1 G, 2 B), row-major.
+    pub cfa: [u8; 4],
+    /// `ColorMatrix1` (XYZ → camera, illuminant D65), `None` to write none.
+    pub colour_matrix: Option<[f64; 9]>,
+    /// `AsShotNeutral`, `None` to write none.
+    pub neutral: Option<[f64; 3]>,
+    /// ISO and f-number written to EXIF.
+    pub iso: u16,
+    /// f-number.
+    pub f_number: f64,
+}
+
+impl Default for RawSynthOptions {
+    /// A phone-like sensor: EV −2, 0, +2 around 1/250 s, 6000 e⁻ at white, 3 e⁻ read noise,
+    /// 10-bit-like levels in a 12-bit range (black 256, white 4095), RGGB, camera RGB =
+    /// Rec.709 ([`XYZ_TO_REC709`]), neutral white balance, ISO 100, f/1.8.
+    fn default() -> Self {
+        Self {
+            evs: vec![-2.0, 0.0, 2.0],
+            base_time_s: 1.0 / 250.0,
+            seed: 1,
+            full_well: 6000.0,
+            read_noise: 3.0,
+            black: 256,
+            white: 4095,
+            cfa: [0, 1, 1, 2],
+            colour_matrix: Some(XYZ_TO_REC709),
+            neutral: Some([1.0, 1.0, 1.0]),
+            iso: 100,
+            f_number: 1.8,
+        }
+    }
+}
+
+/// Photographs `truth` (camera RGB radiance, relative units) with a simulated Bayer sensor and
+/// writes each frame as an uncompressed DNG (the `tiff` crate writes the tags). Radiance `L`
+/// gives the raw value `v = L · Δt · k`, `k = 0.25 / base_time_s` (1 = white), with Gaussian
+/// photon shot noise (variance = electrons) and read noise, quantised to integer raw units
+/// and clipped at the white level. Returns `(file name, DNG bytes)`, shortest exposure first.
+pub fn raw_bracket(
+    truth: &HdrImage,
+    opts: &RawSynthOptions,
+) -> Result<Vec<(String, Vec<u8>)>, SynthError> {
+    let (w, h) = (truth.width, truth.height);
+    if w < 4 || h < 4 || opts.white <= opts.black || opts.evs.is_empty() {
+        return Err(SynthError::BadOption(
+            "RAW bracket needs at least 4 × 4 pixels, one EV and white above black".into(),
+        ));
+    }
+    let k = 0.25 / opts.base_time_s;
+    let mut evs = opts.evs.clone();
+    evs.sort_by(f64::total_cmp);
+    let mut rng = SplitMix64::new(opts.seed ^ 0x0DA7_A5EE_D0F0_0D00);
+    let range = f64::from(opts.white - opts.black);
+    let mut out = Vec::with_capacity(evs.len());
+    for ev in evs {
+        let t = opts.base_time_s * ev.exp2();
+        let mut raw = vec![0u16; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let c = usize::from(opts.cfa[(y & 1) * 2 + (x & 1)]);
+                let l = f64::from(truth.data[3 * (y * w + x) + c]).max(0.0);
+                let e = l * t * k * opts.full_well;
+                let sd = (e + opts.read_noise * opts.read_noise).sqrt();
+                let v = (e + sd * rng.normal()) / opts.full_well;
+                let r = (f64::from(opts.black) + v * range).round();
+                raw[y * w + x] = r.clamp(0.0, f64::from(opts.white)) as u16;
+            }
+        }
+        let bytes = encode_dng(&raw, w, h, opts, t).map_err(SynthError::BadOption)?;
+        out.push((format!("raw_ev{ev:+}.dng"), bytes));
+    }
+    Ok(out)
+}
+
+/// One CFA frame as an uncompressed 16-bit DNG with its exposure in an EXIF IFD.
+fn encode_dng(
+    raw: &[u16],
+    w: usize,
+    h: usize,
+    opts: &RawSynthOptions,
+    time_s: f64,
+) -> Result<Vec<u8>, String> {
+    use tiff::encoder::{colortype::Gray16, Rational, SRational, TiffEncoder};
+    use tiff::tags::Tag;
+    let err = |e: tiff::TiffError| format!("writing the DNG: {e}");
+    let rational = |v: f64| Rational {
+        n: (v * 1_000_000.0).round() as u32,
+        d: 1_000_000,
+    };
+    let mut buf = std::io::Cursor::new(Vec::new());
+    {
+        let mut enc = TiffEncoder::new(&mut buf).map_err(err)?;
+        let exif = {
+            let mut d = enc.extra_directory().map_err(err)?;
+            d.write_tag(Tag::Unknown(33434), rational(time_s))
+                .map_err(err)?;
+            d.write_tag(Tag::Unknown(33437), rational(opts.f_number))
+                .map_err(err)?;
+            d.write_tag(Tag::Unknown(34855), opts.iso).map_err(err)?;
+            d.finish_with_offsets().map_err(err)?.offset
+        };
+        let mut img = enc.new_image::<Gray16>(w as u32, h as u32).map_err(err)?;
+        let e = img.encoder();
+        e.write_tag(Tag::PhotometricInterpretation, 32803u16)
+            .map_err(err)?;
+        e.write_tag(Tag::Unknown(50706), &[1u8, 4, 0, 0][..])
+            .map_err(err)?;
+        e.write_tag(Tag::Unknown(33421), &[2u16, 2][..])
+            .map_err(err)?;
+        e.write_tag(Tag::Unknown(33422), &opts.cfa[..])
+            .map_err(err)?;
+        e.write_tag(Tag::Unknown(50714), opts.black).map_err(err)?;
+        e.write_tag(Tag::Unknown(50717), opts.white).map_err(err)?;
+        if let Some(m) = opts.colour_matrix {
+            let m: Vec<SRational> = m
+                .iter()
+                .map(|v| SRational {
+                    n: (v * 10_000.0).round() as i32,
+                    d: 10_000,
+                })
+                .collect();
+            e.write_tag(Tag::Unknown(50721), &m[..]).map_err(err)?;
+            e.write_tag(Tag::Unknown(50778), 21u16).map_err(err)?;
+        }
+        if let Some(n) = opts.neutral {
+            let n: Vec<Rational> = n.iter().map(|&v| rational(v)).collect();
+            e.write_tag(Tag::Unknown(50728), &n[..]).map_err(err)?;
+        }
+        e.write_tag(Tag::ExifDirectory, exif).map_err(err)?;
+        img.write_data(raw).map_err(err)?;
+    }
+    Ok(buf.into_inner())
+}

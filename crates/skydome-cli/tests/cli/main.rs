@@ -13,4 +13,5 @@ mod demo;
 mod flat_field;
 mod pipeline_identity;
 mod radiance_tools;
+mod raw;
 mod real_sets;

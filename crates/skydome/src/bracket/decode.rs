@@ -3,23 +3,47 @@
 
 use std::io::Cursor;
 
-use super::{exif::read_exif, BracketError, CaptureInfo, DecodeOptions, DecodedFrame, Pixels};
+use super::{
+    exif::read_exif, BracketError, CaptureInfo, DecodeOptions, DecodedFrame, Pixels, RawColour,
+};
 
-/// Decodes one encoded image (JPEG, PNG or TIFF) and reads its EXIF.
+/// Decodes one encoded image (JPEG, PNG, TIFF or DNG) and reads its EXIF.
 ///
 /// Pixels stay in stored order; [`assemble`](super::assemble) applies orientation once the whole
-/// bracket is known.
+/// bracket is known. A DNG gives its demosaiced camera-RGB codes ([`super::dng`]); use
+/// [`decode_raw`] to have its colour too.
 pub fn decode(
     name: &str,
     bytes: &[u8],
     opts: &DecodeOptions,
 ) -> Result<DecodedFrame, BracketError> {
-    use image::{ImageDecoder, ImageFormat};
+    decode_raw(name, bytes, opts).map(|(f, _)| f)
+}
+
+/// As [`decode`], with the colour of a DNG (`None` for every other format).
+pub fn decode_raw(
+    name: &str,
+    bytes: &[u8],
+    opts: &DecodeOptions,
+) -> Result<(DecodedFrame, Option<RawColour>), BracketError> {
     if bytes.is_empty() {
         return Err(BracketError::Empty {
             file: name.to_string(),
         });
     }
+    if super::dng::is_dng(bytes) {
+        return super::dng::decode_dng(name, bytes, opts).map(|(f, c)| (f, Some(c)));
+    }
+    decode_picture(name, bytes, opts).map(|f| (f, None))
+}
+
+/// Decodes a JPEG, PNG or TIFF through the `image` crate.
+fn decode_picture(
+    name: &str,
+    bytes: &[u8],
+    opts: &DecodeOptions,
+) -> Result<DecodedFrame, BracketError> {
+    use image::{ImageDecoder, ImageFormat};
     let corrupt = |e: &dyn std::fmt::Display| BracketError::Corrupt {
         file: name.to_string(),
         reason: e.to_string(),

@@ -1,7 +1,7 @@
 //! A bracket: decoded frames of one still scene at different exposures.
 //!
 //! This module turns encoded photos (JPEG, PNG, TIFF; 8 or 16 bits per channel; grey is promoted
-//! to RGB) into [`Frame`]s, reads their exposure from EXIF (or takes it from the caller), and
+//! to RGB; DNG RAW files, see [`dng`]) into [`Frame`]s, reads their exposure from EXIF (or takes it from the caller), and
 //! validates the set before anything downstream sees it:
 //!
 //! - at least two frames, all of the same size and bit depth;
@@ -23,12 +23,14 @@
 
 mod checks;
 mod decode;
+pub mod dng;
 mod exif;
 pub mod tiff;
 mod times;
 
 pub use checks::{assemble, assemble_with_black_level};
-pub use decode::{check_jpeg_complete, decode};
+pub use decode::{check_jpeg_complete, decode, decode_raw};
+pub use dng::{is_dng, RawColour};
 pub use exif::{parse_exif_datetime, parse_iso8601, parse_utc_offset, read_metadata, FileMetadata};
 pub use times::{parse_list_file, parse_time, parse_times, times_from_list};
 
@@ -306,8 +308,16 @@ pub enum BracketError {
         file: String,
     },
     /// The format is not JPEG, PNG or TIFF.
-    #[error("{file}: unsupported or unrecognised image format (skydome reads JPEG, PNG and TIFF)")]
+    #[error(
+        "{file}: unsupported or unrecognised image format (skydome reads JPEG, PNG, TIFF and DNG)"
+    )]
     UnsupportedFormat {
+        /// File name.
+        file: String,
+    },
+    /// Some frames are RAW (DNG) and others are not.
+    #[error("{file}: a bracket is all RAW (DNG) or all pictures (JPEG, PNG, TIFF); this frame is not like the first")]
+    MixedRaw {
         /// File name.
         file: String,
     },

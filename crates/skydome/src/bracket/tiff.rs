@@ -110,7 +110,7 @@ pub fn encode_ifds(mut ifd0: Vec<Entry>, mut exif: Vec<Entry>, mut gps: Vec<Entr
 }
 
 /// Bytes per element of a TIFF type, `None` for unknown types.
-fn type_size(kind: u16) -> Option<usize> {
+pub(super) fn type_size(kind: u16) -> Option<usize> {
     match kind {
         1 | 2 | 6 | 7 => Some(1),
         3 | 8 => Some(2),
@@ -122,7 +122,7 @@ fn type_size(kind: u16) -> Option<usize> {
 
 /// Reads one IFD leniently: its entries (values converted to little-endian) and nothing else —
 /// no link is followed. Entries of unknown type or pointing outside `tiff` are skipped.
-fn read_ifd(tiff: &[u8], at: usize, big: bool) -> Vec<Entry> {
+pub(super) fn read_ifd(tiff: &[u8], at: usize, big: bool) -> Vec<Entry> {
     let u16_at = |o: usize| -> Option<u16> {
         let b = tiff.get(o..o + 2)?;
         Some(if big {

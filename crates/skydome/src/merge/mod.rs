@@ -49,7 +49,9 @@
 
 mod consistency;
 mod hat;
+mod linear;
 mod refine;
+mod uncertainty;
 
 use crate::bracket::{Frame, Pixels};
 use crate::image::{Circle, HdrImage};
@@ -58,6 +60,9 @@ use crate::response::{Response, LEVELS};
 use consistency::{consistency, Votes};
 use hat::{run_bands, run_releasing, weight, Tables};
 use refine::{refine, Refine};
+
+pub use linear::{estimate_linear_noise, merge_linear, LinearMerged, LinearNoise, SAFE_FRACTION};
+pub use uncertainty::{standard_error, summarise as summarise_standard_error};
 
 /// [`Merged::clipped`] bit: the pixel is saturated (code 255 or the hat's zero) in every frame in
 /// some channel; its value is the shortest frame's lower bound.

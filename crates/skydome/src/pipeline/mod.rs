@@ -30,13 +30,14 @@ mod sky_stage;
 use std::ops::ControlFlow;
 
 use crate::align::{self, AlignOptions, Alignment};
-use crate::bracket::{self, Bracket, BracketError, DecodeOptions, DecodedFrame};
+use crate::bracket::{self, Bracket, BracketError, DecodeOptions, DecodedFrame, RawColour};
 use crate::camera::CameraProfile;
 use crate::fisheye::{self, CircleFit, FisheyeError, LensProfile};
 use crate::formats::picture::{grey_picture, PictureError};
 use crate::formats::{HdrMeta, ABSOLUTE_UNITS_LINE};
 use crate::image::{fmt_num, Circle, HdrImage, RgbImage};
 use crate::merge::{self, MergeError, MergeOptions, Merged};
+use crate::noise;
 use crate::overlay::{self, OverlayMarks};
 use crate::photometry::{PhotometryError, PhotometryReport};
 use crate::reproject::ReprojectError;
@@ -52,7 +53,7 @@ pub use options::{
 };
 use progress::Reporter;
 pub use progress::{no_progress, Progress, Stage};
-pub use report::{Dome, FrameSummary, Report};
+pub use report::{Dome, ErrorSummary, FrameSummary, RawReport, Report};
 pub use sky_stage::{GeometryReport, NorthFromSun, SunSource};
 use sky_stage::{SkyOutcome, SkyResult};
 
@@ -108,6 +109,9 @@ pub enum PipelineError {
     /// Encoding a picture failed.
     #[error("{0}")]
     Picture(#[from] PictureError),
+    /// Drawing the confidence picture failed.
+    #[error("{0}")]
+    Plot(#[from] crate::plot::PlotError),
     /// The progress callback asked to stop.
     #[error("cancelled")]
     Cancelled,
@@ -123,23 +127,34 @@ pub fn run(
 ) -> Result<Dome, PipelineError> {
     let mut progress = Reporter(progress);
     check_options(options)?;
-    let mut br = read_bracket(input, options.black_level, &mut progress)?;
+    let (mut br, raw) = read_bracket(input, options.black_level, &mut progress)?;
     let alignment = options.align.then(|| align_frames(&mut br));
     let lens = lens_stage(&options.lens, &br, &mut progress)?;
     let lens_circle = lens.as_ref().map(|(l, _)| l.circle);
     let lens_profile = lens.as_ref().map(|(l, _)| l.clone());
-    let calibrated = response_stage(options, &br, lens_circle, &mut progress)?;
+    let calibrated = match &raw {
+        Some(_) => linear_response(),
+        None => response_stage(options, &br, lens_circle, &mut progress)?,
+    };
     let MergeOutcome {
         mut merged,
         inconsistent_fraction,
         warnings: merge_warnings,
-    } = merge_stage(
-        options,
-        &mut br,
-        &calibrated.response,
-        lens_circle,
-        &mut progress,
-    )?;
+        sigma,
+        raw: raw_report,
+    } = match &raw {
+        Some(colour) => raw_merge_stage(options, &mut br, colour, lens_circle, &mut progress)?,
+        None => merge_stage(
+            options,
+            &mut br,
+            &calibrated.response,
+            lens_circle,
+            &mut progress,
+        )?,
+    };
+    let standard_error = sigma
+        .as_ref()
+        .map(|s| ErrorSummary::of(s, lens_circle.as_ref()));
     let merged_radiance = std::mem::replace(&mut merged.radiance, HdrImage::new(0, 0));
     let clipped = merged.clipped.as_deref();
     let SkyOutcome {
@@ -157,6 +172,11 @@ pub fn run(
         &br,
         &mut progress,
     )?;
+    // The standard error in false colour, in the input photos' pixels (as the float map).
+    let confidence = sigma
+        .as_ref()
+        .map(|s| crate::plot::standard_error_picture(s, lens_circle.as_ref(), 150))
+        .transpose()?;
     let (equirect, angular, geometry, sky_warnings) = match sky.map(|s| sky_maps(s, &meta)) {
         Some(m) => (m.equirect, m.angular, Some(m.report), m.warnings),
         None => (None, None, None, Vec::new()),
@@ -170,6 +190,11 @@ pub fn run(
         br.warnings.clone(),
         calibrated.warnings,
         merge_warnings,
+        standard_error
+            .as_ref()
+            .and_then(ErrorSummary::warning)
+            .into_iter()
+            .collect(),
         sky_warnings,
         photometry_warning(photometry.as_ref(), sun_from_reading)
             .into_iter()
@@ -186,6 +211,8 @@ pub fn run(
         clipped_low_pixels: merged.clipped_low,
         black_pixels: merged.black_pixels,
         noise: merged.noise,
+        raw: raw_report,
+        standard_error,
         inconsistent_fraction,
         alignment,
         meta: meta.clone(),
@@ -206,7 +233,8 @@ pub fn run(
         preview: pictures.preview,
         overlay: pictures.overlay,
         marks,
-        confidence: pictures.confidence,
+        confidence,
+        standard_error: sigma,
         consistency: pictures.consistency,
         camera_profile,
         lens_profile,
@@ -230,6 +258,17 @@ struct Calibrated {
     /// Where the response came from, for the report.
     from: &'static str,
     warnings: Vec<String>,
+}
+
+/// A RAW bracket's response: linear by construction, nothing to fit.
+fn linear_response() -> Calibrated {
+    Calibrated {
+        response: Response::linear(),
+        profile: None,
+        sampling: None,
+        from: "linear (RAW)",
+        warnings: Vec::new(),
+    }
 }
 
 /// The response stage: the camera profile's response, or a calibration on these frames,
@@ -279,6 +318,63 @@ struct MergeOutcome {
     /// Fraction of the tested pixels where frames disagree, when tested.
     inconsistent_fraction: Option<f64>,
     warnings: Vec<String>,
+    /// The per-pixel standard error (stops, per channel), when the confidence was asked for.
+    sigma: Option<HdrImage>,
+    /// What the RAW path read and estimated, for a RAW bracket.
+    raw: Option<RawReport>,
+}
+
+/// The merge stage of a RAW bracket: linear frames merged per camera channel with their
+/// Poisson–Gaussian noise, then to linear Rec.709 (see [`merge::merge_linear`]).
+fn raw_merge_stage(
+    options: &Options,
+    br: &mut Bracket,
+    colour: &RawColour,
+    lens_circle: Option<Circle>,
+    progress: &mut Reporter<'_>,
+) -> Result<MergeOutcome, PipelineError> {
+    progress.at(Stage::Merging, 0.0)?;
+    let lin = merge::merge_linear(&br.frames, colour, None)?;
+    for f in br.frames.iter_mut() {
+        f.pixels.release_from(0);
+    }
+    progress.at(Stage::Merging, 1.0)?;
+    let merged = Merged {
+        radiance: lin.radiance,
+        confidence: None,
+        clipped: lens_circle.is_some().then(|| lin.clipped.clone()),
+        clipped_high: lin.clipped_high,
+        clipped_low: lin.clipped_low,
+        black_pixels: 0,
+        noise: None,
+        inconsistent: None,
+        inconsistent_pixels: 0,
+        tested_pixels: 0,
+    };
+    let mut warnings = Vec::new();
+    if !lin.noise.fitted {
+        warnings.push("the sensor's noise could not be estimated from this RAW bracket (too few photosites well exposed in two frames): a typical phone sensor was assumed for the weights".into());
+    }
+    if merged.clipped_high > 0 {
+        warnings.push(format!(
+            "{} pixels are clipped even in the shortest exposure; their radiance is a lower bound",
+            merged.clipped_high
+        ));
+    }
+    if colour.matrix_from.starts_with("identity") {
+        warnings.push("the DNG has no colour matrix: camera RGB was kept (white-balanced), not converted to Rec.709".into());
+    }
+    Ok(MergeOutcome {
+        merged,
+        inconsistent_fraction: None,
+        warnings,
+        sigma: options.products.confidence.then_some(lin.sigma_stops),
+        raw: Some(RawReport {
+            colour: colour.clone(),
+            noise: lin.noise,
+            demosaic: "bilinear".into(),
+        }),
+    })
 }
 
 /// The merge stage: linear radiance from the frames, whose pixels are given back as the merge
@@ -297,6 +393,16 @@ fn merge_stage(
         ResponseSource::Profile(prof) => prof.noise.as_deref().copied(),
         ResponseSource::Calibrate(_) => None,
     };
+    // The standard error needs a noise model; the frames are given back during the merge.
+    let error_noise = options.products.confidence.then(|| match profile_noise {
+        Some(n) if n.is_valid() => n,
+        _ => noise::estimate(&br.frames, response, options.black_level, None).model,
+    });
+    let log_exposures: Vec<f64> = br
+        .frames
+        .iter()
+        .map(|f| f.exposure.relative().ln())
+        .collect();
     let merged = merge::merge_releasing(
         &mut br.frames,
         response,
@@ -304,7 +410,7 @@ fn merge_stage(
             weighting: options.weighting,
             confidence: options.products.confidence,
             // Only needed to count black pixels inside the lens circle.
-            clipped_mask: lens_circle.is_some(),
+            clipped_mask: lens_circle.is_some() || options.products.confidence,
             noise: profile_noise,
             black_level: options.black_level,
             consistency: options.consistency || options.ghosts || options.products.consistency,
@@ -323,10 +429,24 @@ fn merge_stage(
         .inconsistent
         .is_some()
         .then(|| merged.inconsistent_fraction());
+    let sigma = error_noise.map(|n| {
+        let model = merged.noise.map_or(n, |e| e.model);
+        merge::standard_error(
+            &merged.radiance,
+            merged.clipped.as_deref(),
+            &log_exposures,
+            response,
+            &model,
+            options.weighting,
+            options.black_level,
+        )
+    });
     Ok(MergeOutcome {
         merged,
         inconsistent_fraction,
         warnings,
+        sigma,
+        raw: None,
     })
 }
 
@@ -398,11 +518,10 @@ fn photometry_warning(p: Option<&PhotometryReport>, sun_from_reading: bool) -> O
 struct Pictures {
     preview: Option<RgbImage<u8>>,
     overlay: Option<RgbImage<u8>>,
-    confidence: Option<RgbImage<u8>>,
     consistency: Option<RgbImage<u8>>,
 }
 
-/// The pictures stage: the merge's consistency and confidence pictures (in the input photos'
+/// The pictures stage: the merge's consistency picture (in the input photos'
 /// pixels), the preview and the overlay of the final dome; nothing unrequested is computed.
 fn pictures_stage(
     options: &Options,
@@ -421,10 +540,6 @@ fn pictures_stage(
         }
         _ => None,
     };
-    let confidence = match &merged.confidence {
-        Some(c) => Some(grey_picture(w, h, c)?),
-        None => None,
-    };
     progress.at(Stage::Pictures, 0.0)?;
     let preview = match products.preview {
         true => Some(tonemap::tonemap_u8(radiance, &default_tonemap(None))?),
@@ -438,7 +553,6 @@ fn pictures_stage(
     Ok(Pictures {
         preview,
         overlay,
-        confidence,
         consistency,
     })
 }
@@ -544,38 +658,44 @@ pub fn load_bracket(
     input: Input,
     progress: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Bracket, PipelineError> {
-    read_bracket(input, 0, &mut Reporter(progress))
+    read_bracket(input, 0, &mut Reporter(progress)).map(|(b, _)| b)
 }
 
 /// Decodes and assembles the bracket; `black_level` is [`Options::black_level`] (0 = not
-/// known), which the bracket's checks honour.
+/// known), which the bracket's checks honour. The second value is the colour of a RAW bracket.
 fn read_bracket(
     input: Input,
     black_level: u8,
     p: &mut Reporter<'_>,
-) -> Result<Bracket, PipelineError> {
+) -> Result<(Bracket, Option<RawColour>), PipelineError> {
     p.at(Stage::Decoding, 0.0)?;
-    let decoded = match input.frames {
-        Frames::Decoded(d) => d,
+    let (decoded, raw) = match input.frames {
+        Frames::Decoded(d) => (d, None),
         Frames::Encoded(e) => decode_all(&e, &input.decode, p)?,
+    };
+    // RAW frames keep their sensor order (the CFA phase), whatever EXIF says.
+    let orientation = match raw {
+        Some(_) => bracket::OrientationPolicy::Ignore,
+        None => input.orientation,
     };
     let br = bracket::assemble_with_black_level(
         decoded,
         input.times.as_deref(),
-        input.orientation,
+        orientation,
         black_level,
     )?;
     p.at(Stage::Decoding, 1.0)?;
-    Ok(br)
+    Ok((br, raw))
 }
 
 /// Decodes frames, a few at a time (in parallel with the `parallel` feature), reporting after
 /// each group. The first frame's error wins, so the message is the same on every machine.
+/// A bracket is RAW (DNG) or not as a whole; the colour is the first DNG's.
 fn decode_all(
     frames: &[EncodedFrame],
     opts: &DecodeOptions,
     p: &mut Reporter<'_>,
-) -> Result<Vec<DecodedFrame>, PipelineError> {
+) -> Result<(Vec<DecodedFrame>, Option<RawColour>), PipelineError> {
     if frames.len() < 2 {
         return Err(BracketError::TooFewFrames(frames.len()).into());
     }
@@ -584,8 +704,9 @@ fn decode_all(
     #[cfg(not(feature = "parallel"))]
     let group = 1;
     let mut out = Vec::with_capacity(frames.len());
+    let mut raw_of: Option<RawColour> = None;
     for chunk in frames.chunks(group) {
-        let decode = |f: &EncodedFrame| bracket::decode(&f.name, &f.bytes, opts);
+        let decode = |f: &EncodedFrame| bracket::decode_raw(&f.name, &f.bytes, opts);
         #[cfg(feature = "parallel")]
         let done: Vec<_> = {
             use rayon::prelude::*;
@@ -594,14 +715,24 @@ fn decode_all(
         #[cfg(not(feature = "parallel"))]
         let done: Vec<_> = chunk.iter().map(decode).collect();
         for d in done {
-            out.push(d?);
+            let (frame, colour) = d?;
+            if !out.is_empty() && colour.is_some() != raw_of.is_some() {
+                return Err(BracketError::MixedRaw {
+                    file: frame.name.clone(),
+                }
+                .into());
+            }
+            if out.is_empty() {
+                raw_of = colour;
+            }
+            out.push(frame);
         }
         p.at(
             Stage::Decoding,
             out.len() as f64 / frames.len() as f64 * 0.99,
         )?;
     }
-    Ok(out)
+    Ok((out, raw_of))
 }
 
 /// The lens stage: the lens profile and, when the circle was detected, the fit.
@@ -677,7 +808,7 @@ pub fn detect_lens_circle(input: Input) -> Result<(CircleFit, RgbImage<u8>), Pip
         frames => {
             let input = Input { frames, ..input };
             let br = read_bracket(input, 0, &mut Reporter(&mut no_progress))?;
-            return detect_circle_in(&br.frames);
+            return detect_circle_in(&br.0.frames);
         }
     };
     let frames: Vec<bracket::Frame> = frames

@@ -4,11 +4,12 @@ use serde::{Deserialize, Serialize};
 
 use super::GeometryReport;
 use crate::align::Alignment;
-use crate::bracket::Frame;
+use crate::bracket::{Frame, RawColour};
 use crate::camera::CameraProfile;
 use crate::fisheye::LensProfile;
 use crate::formats::HdrMeta;
 use crate::image::{HdrImage, RgbImage};
+use crate::merge::LinearNoise;
 use crate::noise::NoiseEstimate;
 use crate::overlay::OverlayMarks;
 use crate::photometry::PhotometryReport;
@@ -50,6 +51,12 @@ pub struct Report {
     pub black_pixels: usize,
     /// The noise model the merge used (weighting `noise`, or the consistency test).
     pub noise: Option<NoiseEstimate>,
+    /// A RAW bracket's colour, demosaicing and estimated sensor noise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub raw: Option<RawReport>,
+    /// The per-pixel standard error in summary, when the confidence map was asked for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub standard_error: Option<ErrorSummary>,
     /// Fraction of the tested pixels where frames disagree beyond their noise, when tested.
     pub inconsistent_fraction: Option<f64>,
     /// The translation of each frame, when aligned.
@@ -81,8 +88,14 @@ pub struct Dome {
     pub overlay: Option<RgbImage<u8>>,
     /// What the overlay draws (output pixels), when there was a lens.
     pub marks: Option<OverlayMarks>,
-    /// The confidence picture (grey, black = no frame well exposed), when asked.
+    /// The confidence picture, when asked: the per-pixel standard error in false colour with
+    /// its scale bar ([`crate::plot::standard_error_picture`]; magenta = not measured), in the
+    /// input photos' pixels.
     pub confidence: Option<RgbImage<u8>>,
+    /// The per-pixel standard error of the radiance in stops (per channel, `+∞` where the
+    /// bracket did not measure), in the input photos' pixels, when the confidence was asked
+    /// for: the float map to write as `.exr`.
+    pub standard_error: Option<HdrImage>,
     /// The consistency picture (white = frames disagree beyond their noise), when asked.
     pub consistency: Option<RgbImage<u8>>,
     /// The camera profile made by calibrating on this bracket (with the camera's EXIF make,
@@ -92,6 +105,63 @@ pub struct Dome {
     pub lens_profile: Option<LensProfile>,
     /// The report.
     pub report: Report,
+}
+
+/// What the RAW path read and estimated.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RawReport {
+    /// The colour read from the DNG.
+    pub colour: RawColour,
+    /// The Poisson–Gaussian noise estimated from the frames.
+    pub noise: LinearNoise,
+    /// The demosaicing method.
+    pub demosaic: String,
+}
+
+/// The standard-error map in numbers (see [`crate::merge::standard_error`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ErrorSummary {
+    /// Median over the measured pixels (inside the lens circle when there is one) of each
+    /// pixel's largest channel standard error, stops.
+    pub median_stops: f64,
+    /// The 90th percentile of the same, stops.
+    pub p90_stops: f64,
+    /// Fraction of the pixels the bracket did not measure (clipped in the shortest frame or
+    /// black in the longest).
+    pub unmeasured_fraction: f64,
+}
+
+/// Above this fraction of unmeasured pixels the report warns.
+pub const UNMEASURED_WARN_FRACTION: f64 = 0.001;
+
+impl ErrorSummary {
+    /// The summary of a standard-error map, over the pixel centres inside `circle` when given.
+    pub fn of(sigma: &HdrImage, circle: Option<&crate::image::Circle>) -> Self {
+        let w = sigma.width.max(1);
+        let inside = |k: usize| {
+            circle.is_none_or(|c| {
+                let (x, y) = ((k % w) as f64 + 0.5, (k / w) as f64 + 0.5);
+                (x - c.cx).hypot(y - c.cy) <= c.r
+            })
+        };
+        let (median_stops, p90_stops, unmeasured_fraction) =
+            crate::merge::summarise_standard_error(sigma, Some(&inside));
+        Self {
+            median_stops,
+            p90_stops,
+            unmeasured_fraction,
+        }
+    }
+
+    /// The warning when part of the picture is beyond what the bracket measured.
+    pub fn warning(&self) -> Option<String> {
+        (self.unmeasured_fraction > UNMEASURED_WARN_FRACTION).then(|| {
+            format!(
+                "{:.2} % of the picture is beyond what the bracket measured (clipped in the shortest frame or black in the longest): its radiance is only a bound (magenta in the confidence map)",
+                100.0 * self.unmeasured_fraction
+            )
+        })
+    }
 }
 
 impl FrameSummary {
