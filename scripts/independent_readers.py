@@ -11,7 +11,7 @@ Requirements (tested with numpy 2.4.6, opencv-python-headless 4.14.0.94, OpenIma
 Usage:
 
     independent_readers.py DIR
-        Verify a directory written by crates/skydome/tests/independent_readers.rs: DIR/manifest.json
+        Verify a directory written by crates/skydome/tests/lib/independent_readers.rs: DIR/manifest.json
         lists cases; each file is read with OpenCV (cv2.imread(path, cv2.IMREAD_UNCHANGED), BGR)
         and OpenImageIO and compared with the raw little-endian float32 RGB dump of what the file
         must hold (.hdr: our own decode, i.e. the RGBE-quantised values; .exr: the stored

@@ -5,7 +5,7 @@ import assert from 'node:assert/strict';
 import { cpSync, existsSync, readFileSync, readdirSync, writeFileSync } from 'node:fs';
 import path from 'node:path';
 import {
-  appDir, cli, download, headerLines, onScreen, phone, resultOrError, screenshot, serve, setSettings,
+  appDir, cli, cliError, download, headerLines, onScreen, phone, resultOrError, screenshot, serve, setSettings,
   sharedData, tempDir, root,
 } from './support.mjs';
 
@@ -109,13 +109,29 @@ test('gallery path: a real bracket gives the same .hdr bytes as skydome merge', 
  *  at compass heading h is rotated by alpha = 360° − h about the vertical: quaternion
  *  (0, 0, sin(alpha/2), cos(alpha/2)). Set before the page loads, so the first event has it. */
 async function setHeading(page, heading) {
-  const cdp = page.__cdp || (page.__cdp = await page.context().newCDPSession(page));
+  let cdp = page.__cdp;
+  if (!cdp) {
+    cdp = page.__cdp = await page.context().newCDPSession(page);
+    // Once per page: Chromium refuses a second override of the same sensor.
+    await cdp.send('Emulation.setSensorOverrideEnabled', { enabled: true, type: 'absolute-orientation', metadata: { available: true } });
+  }
   const half = (((360 - heading) % 360) * Math.PI) / 360;
-  await cdp.send('Emulation.setSensorOverrideEnabled', { enabled: true, type: 'absolute-orientation', metadata: { available: true } });
   await cdp.send('Emulation.setSensorOverrideReadings', {
     type: 'absolute-orientation',
     reading: { quaternion: { x: 0, y: 0, z: Math.sin(half), w: Math.cos(half) } },
   });
+}
+
+/** Sets the compass to `heading` and waits until the page shows it (the first reading may
+ *  precede the page's listener, so it is sent again until it arrives). */
+async function compassAt(page, heading) {
+  await setHeading(page, heading);
+  for (let i = 0; ; i++) {
+    const shown = await page.waitForFunction((h) => document.getElementById('heading').textContent.startsWith(`${h.toFixed(1)}°`), heading, { timeout: 5000 }).then(() => true, () => false);
+    if (shown) return;
+    assert.ok(i < 6, 'the compass heading reaches the page');
+    await setHeading(page, heading + 1e-9);
+  }
 }
 
 test('fish-eye path: tapped sun and compass north give the CLI\'s #SUN and #NORTH lines', async () => {
@@ -131,13 +147,7 @@ test('fish-eye path: tapped sun and compass north give the CLI\'s #SUN and #NORT
     await setHeading(p.page, heading);
     await openApp(p);
     await setSettings(p.page, { fisheye: true, model: 'stereographic', fov: 235, sun: 'auto', north: '' });
-    // The reading is sent again until the page shows it (the first may precede its listener).
-    for (let i = 0; ; i++) {
-      const shown = await p.page.waitForFunction((h) => document.getElementById('heading').textContent.startsWith(`${h.toFixed(1)}°`), heading, { timeout: 5000 }).then(() => true, () => false);
-      if (shown) break;
-      assert.ok(i < 6, 'the compass heading reaches the page');
-      await setHeading(p.page, heading + 1e-9);
-    }
+    await compassAt(p.page, heading);
     await screenshot(p.page, '6-camera-compass');
     let since = await pickFiles(p.page, [...frames, path.join(synth, 'times.txt')]);
     let msg = await resultOrError(p.page, since);
@@ -189,6 +199,68 @@ test('fish-eye path: tapped sun and compass north give the CLI\'s #SUN and #NORT
   } finally { await p.close(); }
 });
 
+/** The `#NORTH=` point of a Radiance file's header as {x, y}. */
+function northOf(bytes) {
+  const line = headerLines(bytes).find((l) => l.startsWith('#NORTH='));
+  assert.ok(line, 'a #NORTH= line');
+  const m = line.match(/^#NORTH=-Y (\S+) \+X (\S+)$/);
+  return { x: Number(m[2]), y: Number(m[1]) };
+}
+
+test('live overlay: the north point for a stored lens and the compass is the core\'s, where skydome merge puts #NORTH', async () => {
+  const dir = tempDir('north');
+  const demo = path.join(root, 'demo');
+  const frames = ['frame_0.jpg', 'frame_1.jpg', 'frame_2.jpg'].map((f) => path.join(demo, f));
+  const lensFile = path.join(dir, 'lens.json');
+  cli(['lens', 'fit', '--circle', '200,200,192', '--fov', '235', '--model', 'stereographic', '-o', lensFile, '--quiet']);
+  // The command line's north point for the same lens (no crop: the photo's own pixels, as the
+  // live picture's) at each heading.
+  const expected = (heading) => {
+    const out = path.join(dir, `north_${heading}.hdr`);
+    cli(['merge', ...frames, '--times-file', path.join(demo, 'times.txt'), '--lens', lensFile,
+      '--north', String(heading), '-o', out, '--quiet']);
+    return northOf(readFileSync(out));
+  };
+  const badFile = path.join(dir, 'bent_lens.json');
+  const lens = JSON.parse(readFileSync(lensFile, 'utf8'));
+  writeFileSync(badFile, JSON.stringify({ ...lens, circle: { ...lens.circle, r: -5 } }));
+
+  const p = await phone(server.origin);
+  try {
+    await p.page.goto('about:blank');
+    await setHeading(p.page, 37);
+    await openApp(p);
+    await compassAt(p.page, 37);
+    // A profile the core refuses: its sentence names the file.
+    await p.page.click('#to-settings');
+    await onScreen(p.page, 'settings');
+    await p.page.setInputFiles('#import', badFile);
+    await p.page.waitForFunction(() => !document.getElementById('message').hidden);
+    const refused = await p.page.textContent('#message');
+    oneSentence(refused);
+    assert.match(refused, /^bent_lens\.json: not a usable lens profile: /, refused);
+    // The lens profile the command line wrote: the overlay is drawn for it.
+    await p.page.setInputFiles('#import', lensFile);
+    await p.page.waitForFunction(() => document.getElementById('message').className === 'info');
+    await p.page.click('#settings-done');
+    await onScreen(p.page, 'camera');
+    for (const heading of [37, 200]) {
+      await compassAt(p.page, heading);
+      const want = expected(heading);
+      await p.page.waitForFunction((w) => {
+        const n = document.body.dataset.north;
+        if (!n) return false;
+        const [x, y] = n.split(',').map(Number);
+        return Math.abs(x - w.x) < 1e-9 && Math.abs(y - w.y) < 1e-9;
+      }, want, { timeout: 10000 }).catch(async () => {
+        assert.fail(`north point ${await p.page.evaluate(() => document.body.dataset.north)} for heading ${heading}, the CLI's ${JSON.stringify(want)}`);
+      });
+    }
+    await screenshot(p.page, '9-camera-north');
+    assertStayedHome(p);
+  } finally { await p.close(); }
+});
+
 test('offline: after the first visit the app loads and merges with the network cut', async () => {
   const demo = path.join(root, 'demo');
   const p = await phone(server.origin);
@@ -209,7 +281,7 @@ test('offline: after the first visit the app loads and merges with the network c
   } finally { await p.close(); }
 });
 
-test('a broken photo gives one sentence naming the file', async () => {
+test('a broken photo gives the command line\'s error as one sentence naming the file', async () => {
   const dir = tempDir('broken');
   const a = path.join(dir, 'sky_a.jpg');
   const b = path.join(dir, 'sky_b.jpg');
@@ -219,11 +291,14 @@ test('a broken photo gives one sentence naming the file', async () => {
   try {
     await openApp(p);
     // First and second: with a decoding worker (two cores or more) the second photo is its.
-    for (const files of [[a, b], [b, a]]) {
-      const since = await pickFiles(p.page, files);
+    for (const names of [['sky_a.jpg', 'sky_b.jpg'], ['sky_b.jpg', 'sky_a.jpg']]) {
+      const since = await pickFiles(p.page, names.map((n) => path.join(dir, n)));
       const msg = await resultOrError(p.page, since);
       oneSentence(msg);
       assert.match(msg, /sky_a\.jpg/);
+      // The core's message, as `skydome merge` prints it (`error: ` and the full stop aside).
+      const line = cliError(['merge', ...names, '-o', 'out.hdr'], dir).replace(/^error: /, '');
+      assert.equal(msg.replace(/\.$/, ''), line.replace(/\.$/, ''));
     }
     await screenshot(p.page, '8-error');
     assertStayedHome(p);

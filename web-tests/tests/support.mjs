@@ -30,6 +30,16 @@ export function cli(args) {
   return execFileSync(skydomeBin(), args, { encoding: 'utf8', stdio: ['ignore', 'pipe', 'pipe'] });
 }
 
+/** Runs the CLI where it must fail; returns the first line of its error output. */
+export function cliError(args, cwd) {
+  try {
+    execFileSync(skydomeBin(), args, { cwd, encoding: 'utf8', stdio: ['ignore', 'pipe', 'pipe'] });
+  } catch (e) {
+    return String(e.stderr).split('\n').find((l) => l.startsWith('error: ')) || String(e.stderr);
+  }
+  throw new Error(`skydome ${args.join(' ')} succeeded; it was expected to fail`);
+}
+
 export function tempDir(name) {
   return mkdtempSync(path.join(tmpdir(), `skydome-web-${name}-`));
 }

@@ -4,8 +4,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use serde::Serialize;
+use skydome::camera::CameraProfile;
 use skydome::image::Circle;
-use skydome::response::{self, CalibrateOptions, CameraProfile, Solver};
+use skydome::response::{self, CalibrateOptions, Solver};
 use skydome::sampling::SampleOptions;
 
 use crate::io::{self, BracketArgs, Outputs};
@@ -203,7 +204,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         if let Some(p) = &a.plot {
             outputs.add(p, crate::pictures::curve_plot(p, &calibration)?);
         }
-        calibration.to_profile()
+        CameraProfile::from_calibration(&calibration)
     };
     spin.finish_and_clear();
     skydome::pipeline::describe_camera(&mut profile, &br);

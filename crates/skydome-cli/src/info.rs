@@ -72,7 +72,7 @@ pub fn run(a: Args) -> Result<()> {
         .as_deref()
         .and_then(|v| skydome::sky::SkyGeometry::from_radiance_view(v, img.width, img.height))
         .map(|g| {
-            skydome::sky::radiance_luminance(skydome::reproject::horizontal_irradiance_fisheye(
+            skydome::image::radiance_luminance(skydome::reproject::horizontal_irradiance_fisheye(
                 img, &g,
             ))
         });

@@ -13,7 +13,8 @@ pub struct BracketArgs {
     /// Exposure times in seconds, in the order of the files (e.g. 1/400,1/100,1/25); overrides EXIF.
     #[arg(long, value_name = "T1,T2,...")]
     pub times: Option<String>,
-    /// A list file with one 'FILE TIME' pair per line; overrides EXIF.
+    /// A list file with one 'FILE TIME' (or 'FILE TIME 1/TIME') line per file, matched by path,
+    /// else by file name; '#' starts a comment. Overrides EXIF.
     #[arg(long, value_name = "LIST")]
     pub times_file: Option<PathBuf>,
     /// EXIF orientation: `apply` it (all frames must agree) or `ignore` it (stored pixel order).
@@ -136,30 +137,8 @@ impl StageBar {
 fn times_from_list(list: &Path, files: &[PathBuf]) -> Result<Vec<f64>> {
     let name = list.display().to_string();
     let text = std::fs::read_to_string(list).with_context(|| format!("{name}: cannot read"))?;
-    let pairs = bracket::parse_list_file(&name, &text)?;
-    files
-        .iter()
-        .map(|f| {
-            let fname = f.file_name().map(|s| s.to_string_lossy().to_string());
-            pairs
-                .iter()
-                .find(|(n, _)| {
-                    Path::new(n) == f.as_path()
-                        || Path::new(n)
-                            .file_name()
-                            .map(|s| s.to_string_lossy().to_string())
-                            == fname
-                })
-                .map(|(_, t)| *t)
-                .ok_or_else(|| {
-                    anyhow!(
-                        "{}: not listed in {name}; add a line '{} TIME'",
-                        f.display(),
-                        fname.unwrap_or_default()
-                    )
-                })
-        })
-        .collect()
+    let files: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
+    Ok(bracket::times_from_list(&name, &text, &files)?)
 }
 
 /// Prints a one-line warning on stderr unless quiet.

@@ -4,10 +4,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use serde::Serialize;
+use skydome::camera::CameraProfile;
 use skydome::image::PixelPoint;
+use skydome::merge::Weighting;
 use skydome::photometry::{Reference, SpotLuminance};
 use skydome::pipeline::{self, Dome, Options, Products, Report, ResponseSource};
-use skydome::response::{CameraProfile, Weighting};
 
 use crate::calibrate::CalibArgs;
 use crate::geometry::GeometryArgs;

@@ -98,7 +98,7 @@ pub fn falsecolor(a: FalsecolorArgs, quiet: bool) -> Result<()> {
     let absolute = file
         .meta
         .is_absolute()
-        .then_some(skydome::sky::RADIANCE_EFFICACY);
+        .then_some(skydome::image::RADIANCE_EFFICACY);
     let img = file.image;
     let fc = plot::false_colour(
         &img,

@@ -18,15 +18,15 @@ use std::ops::ControlFlow;
 
 use serde::{Deserialize, Serialize};
 use skydome::bracket::{CaptureInfo, DecodeOptions, DecodedFrame, Pixels};
+use skydome::camera::CameraProfile;
 use skydome::fisheye::{LensKind, LensProfile};
 use skydome::formats::exr::ExrOptions;
 use skydome::formats::picture::{encode_rgb8, PictureFormat, DEFAULT_JPEG_QUALITY};
 use skydome::formats::{encode_radiance, PixelPoint, RadianceFormat};
 use skydome::image::Circle;
 use skydome::pipeline::{
-    self, Dome, EncodedFrame, Frames, Input, Options, PipelineError, Progress,
+    self, Dome, EncodedFrame, Frames, Input, Options, PipelineError, Progress, Stage,
 };
-use skydome::response::CameraProfile;
 use skydome::sky::{DevicePose, ImageOrientation, SkyGeometry};
 use wasm_bindgen::prelude::*;
 
@@ -81,6 +81,14 @@ pub fn sentence(message: &str) -> String {
     s
 }
 
+/// [`sentence`] for the page: every message the app shows goes through it (the worker's errors
+/// and the report's warnings arrive made; the page sends its own to the worker), so the app has
+/// one way of turning a message into a sentence.
+#[wasm_bindgen(js_name = sentence)]
+pub fn sentence_js(message: &str) -> String {
+    sentence(message)
+}
+
 impl From<WebError> for JsError {
     fn from(e: WebError) -> JsError {
         JsError::new(&sentence(&e.to_string()))
@@ -93,6 +101,74 @@ pub fn parse_options(json: &str) -> Result<Options, WebError> {
     serde_json::from_str(json).map_err(|e| WebError::Options(e.to_string()))
 }
 
+/// The stages of a run in the order [`pipeline::run`] goes through them (the web surface's own
+/// decoding, [`run_mixed`], comes first as [`Stage::Decoding`]). The page's progress bar gives
+/// each an equal share; its stage names are the library's ([`Stage::name`]).
+pub const STAGES: [Stage; 6] = [
+    Stage::Decoding,
+    Stage::Lens,
+    Stage::Calibrating,
+    Stage::Merging,
+    Stage::Sky,
+    Stage::Pictures,
+];
+
+/// Where `stage` comes in [`STAGES`]. The match has no wildcard, so a stage added to the library
+/// stops this crate from compiling until it is placed here (and in [`STAGES`]: a test checks the
+/// two agree).
+const fn stage_position(stage: Stage) -> usize {
+    match stage {
+        Stage::Decoding => 0,
+        Stage::Lens => 1,
+        Stage::Calibrating => 2,
+        Stage::Merging => 3,
+        Stage::Sky => 4,
+        Stage::Pictures => 5,
+    }
+}
+
+/// A progress event as the page shows it: the stage's name, the fraction of it done and the
+/// fraction of the whole run done.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct StageProgress {
+    /// The library's name of the stage ([`Stage::name`]: "decoding", "lens", …).
+    pub stage: &'static str,
+    /// Fraction of the stage done, `0..=1`.
+    pub fraction: f64,
+    /// Fraction of the run done, `0..=1`: the stages before this one in [`STAGES`], each an
+    /// equal share, plus this one's fraction of its share.
+    pub overall: f64,
+}
+
+impl StageProgress {
+    /// The event for `fraction` (clamped to `0..=1`) of `stage`.
+    pub fn new(stage: Stage, fraction: f64) -> StageProgress {
+        let fraction = if fraction.is_nan() {
+            0.0
+        } else {
+            fraction.clamp(0.0, 1.0)
+        };
+        StageProgress {
+            stage: stage.name(),
+            fraction,
+            overall: (stage_position(stage) as f64 + fraction) / STAGES.len() as f64,
+        }
+    }
+
+    fn to_json(self) -> String {
+        // A struct of a string and two finite numbers always serialises.
+        serde_json::to_string(&self).unwrap_or_default()
+    }
+}
+
+/// The progress event (JSON `{stage, fraction, overall}`, see [`StageProgress`]) for `fraction`
+/// of the decoding, which the merging worker reports while decoding workers decode a bracket
+/// before its run.
+#[wasm_bindgen]
+pub fn decoding_progress(fraction: f64) -> String {
+    StageProgress::new(Stage::Decoding, fraction).to_json()
+}
+
 /// Runs the pipeline on encoded photos. `times` (seconds, in the order of `frames`) overrides
 /// EXIF when given. `progress` gets `(stage name, fraction)` and returns `true` to cancel.
 pub fn run_frames(
@@ -101,7 +177,9 @@ pub fn run_frames(
     options: &Options,
     progress: &mut dyn FnMut(&str, f64) -> bool,
 ) -> Result<Dome, WebError> {
-    run_input(Frames::Encoded(frames), times, options, progress)
+    run_input(Frames::Encoded(frames), times, options, &mut |stage, f| {
+        progress(stage.name(), f)
+    })
 }
 
 /// [`run_frames`] on photos some of which were decoded already by other workers
@@ -113,10 +191,22 @@ pub fn run_mixed(
     options: &Options,
     progress: &mut dyn FnMut(&str, f64) -> bool,
 ) -> Result<Dome, WebError> {
+    run_photos(frames, times, options, &mut |stage, f| {
+        progress(stage.name(), f)
+    })
+}
+
+/// [`run_mixed`] with the progress callback given the stage itself.
+fn run_photos(
+    frames: Vec<Photo>,
+    times: Option<Vec<f64>>,
+    options: &Options,
+    progress: &mut dyn FnMut(Stage, f64) -> bool,
+) -> Result<Dome, WebError> {
     let n = frames.len();
     let mut decoded = Vec::with_capacity(n);
     for (i, f) in frames.into_iter().enumerate() {
-        if progress("decoding", 0.99 * i as f64 / n as f64) {
+        if progress(Stage::Decoding, 0.99 * i as f64 / n as f64) {
             return Err(WebError::Pipeline(PipelineError::Cancelled));
         }
         decoded.push(match f {
@@ -134,13 +224,13 @@ fn run_input(
     frames: Frames,
     times: Option<Vec<f64>>,
     options: &Options,
-    progress: &mut dyn FnMut(&str, f64) -> bool,
+    progress: &mut dyn FnMut(Stage, f64) -> bool,
 ) -> Result<Dome, WebError> {
     let input = Input {
         times,
         ..Input::new(frames)
     };
-    let mut forward = |p: &Progress| match progress(p.stage.name(), p.fraction) {
+    let mut forward = |p: &Progress| match progress(p.stage, p.fraction) {
         true => ControlFlow::Break(()),
         false => ControlFlow::Continue(()),
     };
@@ -324,16 +414,11 @@ impl Job {
         })
     }
 
-    /// Number of photos added.
-    pub fn frame_count(&self) -> usize {
-        self.frames.len()
-    }
-
     /// Runs the pipeline with `options_json` ([`Options`] as JSON). `times` are exposure times
-    /// in seconds in the order the photos were added (empty: from EXIF). `progress(stage,
-    /// fraction)` is called between steps; returning `true` cancels.
-    /// The photos go to the run (decoded ones take 3 bytes a pixel), so a second run needs a
-    /// new job.
+    /// in seconds in the order the photos were added (empty: from EXIF). `progress(event)` is
+    /// called between steps with a [`StageProgress`] as JSON (`{stage, fraction, overall}`);
+    /// returning `true` cancels. The photos go to the run (decoded ones take 3 bytes a pixel),
+    /// so a second run needs a new job.
     pub fn run(
         &mut self,
         options_json: &str,
@@ -342,17 +427,14 @@ impl Job {
     ) -> Result<Outcome, JsError> {
         let options = parse_options(options_json)?;
         let times = (!times.is_empty()).then_some(times);
-        let mut cb = |stage: &str, fraction: f64| {
+        let mut cb = |stage: Stage, fraction: f64| {
+            let event = StageProgress::new(stage, fraction).to_json();
             progress
-                .call2(
-                    &JsValue::NULL,
-                    &JsValue::from_str(stage),
-                    &JsValue::from_f64(fraction),
-                )
+                .call1(&JsValue::NULL, &JsValue::from_str(&event))
                 .map(|v| v.is_truthy())
                 .unwrap_or(false)
         };
-        let dome = run_mixed(std::mem::take(&mut self.frames), times, &options, &mut cb)?;
+        let dome = run_photos(std::mem::take(&mut self.frames), times, &options, &mut cb)?;
         Ok(Outcome { dome })
     }
 }
@@ -474,11 +556,6 @@ impl Outcome {
         Ok(self.picture_jpeg(false)?)
     }
 
-    /// Overlay JPEG bytes (circles, north, sun drawn on the preview).
-    pub fn overlay_jpeg(&self) -> Result<Vec<u8>, JsError> {
-        Ok(self.picture_jpeg(true)?)
-    }
-
     /// The camera profile made by calibrating on this bracket, as the CLI's JSON; empty when
     /// a stored profile was used.
     pub fn camera_profile_json(&self) -> String {
@@ -506,24 +583,29 @@ impl Outcome {
     }
 }
 
-/// Checks a camera profile file (the CLI's `camera.json`) and returns it re-serialised; the
-/// error names what is wrong.
+/// Checks a camera profile file (the CLI's `camera.json`; `name` is the file's name, for the
+/// message) and returns it re-serialised; the error names the file and what is wrong.
 #[wasm_bindgen]
-pub fn check_camera_profile(json: &str) -> Result<String, JsError> {
-    let p = CameraProfile::from_json(json)
-        .map_err(|e| WebError::Profile(format!("not a usable camera profile: {e}")))?;
-    p.response()
-        .map_err(|e| WebError::Profile(format!("not a usable camera profile: {e}")))?;
+pub fn check_camera_profile(name: &str, json: &str) -> Result<String, JsError> {
+    let refused = |e: &dyn std::fmt::Display| {
+        WebError::Profile(format!("{name}: not a usable camera profile: {e}"))
+    };
+    let p = CameraProfile::from_json(json).map_err(|e| refused(&e))?;
+    p.response().map_err(|e| refused(&e))?;
     Ok(p.to_json())
 }
 
-/// Checks a lens profile file (the CLI's `lens.json`) and returns it re-serialised.
+/// Checks a lens profile file (the CLI's `lens.json`; `name` is the file's name, for the
+/// message) and returns it re-serialised; the error names the file and what is wrong.
 #[wasm_bindgen]
-pub fn check_lens_profile(json: &str) -> Result<String, JsError> {
+pub fn check_lens_profile(name: &str, json: &str) -> Result<String, JsError> {
+    let refused = |e: &dyn std::fmt::Display| {
+        WebError::Profile(format!("{name}: not a usable lens profile: {e}"))
+    };
     let l = LensProfile::from_json(json)
         .and_then(|l| l.validate().map(|()| l))
-        .map_err(|e| WebError::Profile(format!("not a usable lens profile: {e}")))?;
-    Ok(l.to_json().map_err(|e| WebError::Profile(e.to_string()))?)
+        .map_err(|e| refused(&e))?;
+    Ok(l.to_json().map_err(|e| refused(&e))?)
 }
 
 /// Marks for the live camera overlay, in the photo's displayed pixels.
@@ -612,25 +694,16 @@ pub fn photo_exposure(name: String, bytes: Vec<u8>) -> Result<String, JsError> {
 }
 
 /// Exposure times for photos without EXIF from a list file in the command line's
-/// `--times-file` format (lines `FILE TIME`, `#` comments; times as `0.004` or `1/250`):
-/// the times of `names`, in that order, in seconds.
+/// `--times-file` format (lines `FILE TIME` or `FILE TIME 1/TIME`, `#` comments; times as `0.004`
+/// or `1/250`): the times of `names`, in that order, in seconds, matched as the command line
+/// matches them ([`skydome::bracket::times_from_list`]).
 pub fn times_from_list(
     list_name: &str,
     text: &str,
     names: &[String],
 ) -> Result<Vec<f64>, WebError> {
-    let pairs = skydome::bracket::parse_list_file(list_name, text)
-        .map_err(|e| WebError::Pipeline(e.into()))?;
-    names
-        .iter()
-        .map(|n| {
-            pairs
-                .iter()
-                .find(|(file, _)| file == n)
-                .map(|(_, t)| *t)
-                .ok_or_else(|| WebError::Profile(format!("{list_name}: no exposure time for {n}")))
-        })
-        .collect()
+    skydome::bracket::times_from_list(list_name, text, names)
+        .map_err(|e| WebError::Pipeline(e.into()))
 }
 
 /// [`times_from_list`] for the page.
@@ -697,12 +770,6 @@ pub fn warm_up_js(size: usize) -> Result<(), JsError> {
     Ok(warm_up(size)?)
 }
 
-/// The library's version (`SOFTWARE=skydome <version>` in headers).
-#[wasm_bindgen]
-pub fn version() -> String {
-    skydome::VERSION.to_string()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -717,6 +784,58 @@ mod tests {
         assert_eq!(sentence("done!"), "Done!");
         assert_eq!(sentence("calibration failed: x"), "Calibration failed: x.");
         assert_eq!(sentence(""), "Something went wrong.");
+    }
+
+    #[test]
+    fn stages_are_listed_once_each_in_their_place() {
+        for (i, s) in STAGES.iter().enumerate() {
+            assert_eq!(stage_position(*s), i, "{s:?}");
+        }
+        let p = StageProgress::new(Stage::Merging, 0.5);
+        assert_eq!(
+            (p.stage, p.fraction, p.overall),
+            ("merging", 0.5, 3.5 / 6.0)
+        );
+        assert_eq!(StageProgress::new(Stage::Pictures, 1.0).overall, 1.0);
+        assert_eq!(StageProgress::new(Stage::Decoding, -1.0).overall, 0.0);
+        assert_eq!(StageProgress::new(Stage::Lens, f64::NAN).fraction, 0.0);
+        assert_eq!(
+            decoding_progress(0.5),
+            r#"{"stage":"decoding","fraction":0.5,"overall":0.08333333333333333}"#
+        );
+    }
+
+    /// A run of the bundled fish-eye bracket with every stage goes through them in the order
+    /// the page's progress bar counts them.
+    #[test]
+    fn a_run_reports_its_stages_in_the_listed_order() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo");
+        let frames = (0..3)
+            .map(|i| {
+                let name = format!("frame_{i}.jpg");
+                let bytes = std::fs::read(format!("{dir}/{name}")).expect("demo frame");
+                Photo::Encoded(EncodedFrame { name, bytes })
+            })
+            .collect();
+        let options = parse_options(
+            r#"{"lens": {"detect": {"model": "stereographic", "fov_deg": 235, "circle": null}},
+                "sky": {"crop": true, "north_deg": 0, "sun": "auto"}, "products": {"preview": true}}"#,
+        )
+        .expect("options");
+        let mut seen = Vec::new();
+        run_photos(
+            frames,
+            Some(vec![0.001, 0.004, 0.016]),
+            &options,
+            &mut |stage, _| {
+                seen.push(stage_position(stage));
+                false
+            },
+        )
+        .expect("run");
+        assert!(seen.windows(2).all(|w| w[0] <= w[1]), "{seen:?}");
+        seen.dedup();
+        assert_eq!(seen, (0..STAGES.len()).collect::<Vec<_>>());
     }
 
     #[test]

@@ -2,6 +2,9 @@
 //! through `skydome::pipeline` directly, on the bundled fish-eye bracket with several option
 //! sets; and the page's JSON reaches the pipeline unchanged.
 
+#[path = "../../skydome/tests/common/required.rs"]
+mod required;
+
 use skydome::formats::{encode_radiance, PixelPoint, RadianceFormat};
 use skydome::pipeline::{self, EncodedFrame, Frames, Input, Options, SunMode};
 use skydome_web::{
@@ -121,8 +124,46 @@ fn times_list_names_the_missing_file() {
     .expect_err("b has no time");
     assert_eq!(
         skydome_web::sentence(&e.to_string()),
-        "times.txt: no exposure time for b.jpg."
+        "b.jpg: not listed in times.txt; add a line 'b.jpg TIME'."
     );
+}
+
+/// The page names photos by file name, the command line by the paths it was given: one list
+/// gives both the same times (the command line calls `skydome::bracket::times_from_list` with
+/// the paths), whether it names files by path or by name, in two or three columns.
+#[test]
+fn times_list_gives_the_page_and_the_command_line_the_same_times() {
+    let list = "# Filename exposure 1/shutter_speed\n\
+                shots/a.jpg 1/400 400\n\
+                /elsewhere/b.jpg 0.01\n\
+                c.jpg 0.04 25\n";
+    let names: Vec<String> = ["a.jpg", "b.jpg", "c.jpg"].map(String::from).to_vec();
+    let paths: Vec<String> = names.iter().map(|n| format!("shots/{n}")).collect();
+    let page = times_from_list("times.txt", list, &names).expect("page");
+    let cli = skydome::bracket::times_from_list("times.txt", list, &paths).expect("cli");
+    assert_eq!(page, [1.0 / 400.0, 0.01, 0.04]);
+    assert_eq!(page, cli);
+
+    let dir = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/ssarcandy_street"
+    );
+    match std::fs::read_to_string(format!("{dir}/image_list.txt")) {
+        Ok(list) => {
+            let names: Vec<String> = (92..=102).map(|i| format!("DSC_{i:04}.png")).collect();
+            let paths: Vec<String> = names.iter().map(|n| format!("{dir}/{n}")).collect();
+            let page = times_from_list("image_list.txt", &list, &names).expect("page");
+            let cli =
+                skydome::bracket::times_from_list("image_list.txt", &list, &paths).expect("cli");
+            assert_eq!(page, cli);
+            assert_eq!(page[0], 1.0 / 1024.0);
+            assert_eq!(page[10], 1.0);
+        }
+        Err(_) if std::env::var_os("SKYDOME_REQUIRE_SHARED_DATA").is_some() => {
+            panic!("{dir}/image_list.txt is missing")
+        }
+        Err(_) => eprintln!("skipping the ssarcandy list: {dir} is missing"),
+    }
 }
 
 /// The warm-up the worker runs after loading goes through the whole pipeline without error (a
@@ -163,36 +204,27 @@ fn overlay_on_request_is_the_runs_overlay() {
 /// message the run gives; parts that do not belong together are refused.
 #[test]
 fn photos_decoded_in_other_workers_give_the_same_bytes() {
-    let shared = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/frobisher_001"
-    );
     let (demo_frames, demo_times) = demo();
     let fisheye = r#"{"lens": {"detect": {"model": "stereographic", "fov_deg": 235, "circle": null}},
             "sky": {"crop": true, "north_deg": 37, "sun": "auto"}, "products": {"preview": true}}"#;
     let mut sets = vec![(demo_frames, Some(demo_times), fisheye)];
-    match std::fs::read_dir(shared) {
-        Ok(dir) => {
-            let mut v: Vec<EncodedFrame> = dir
-                .filter_map(Result::ok)
-                .map(|e| e.path())
-                .filter(|p| p.extension().is_some_and(|x| x == "jpg"))
-                .map(|p| EncodedFrame {
-                    name: p
-                        .file_name()
-                        .map(|n| n.to_string_lossy().into_owned())
-                        .unwrap_or_default(),
-                    bytes: std::fs::read(&p).expect("frobisher frame"),
-                })
-                .collect();
-            v.sort_by(|a, b| a.name.cmp(&b.name));
-            assert_eq!(v.len(), 3);
-            sets.push((v, None, "{}"));
-        }
-        Err(_) if std::env::var_os("SKYDOME_REQUIRE_SHARED_DATA").is_some() => {
-            panic!("{shared} is missing")
-        }
-        Err(_) => eprintln!("skipping the EXIF set: {shared} is missing"),
+    if let Some(shared) = required::shared_data("frobisher_001") {
+        let mut v: Vec<EncodedFrame> = std::fs::read_dir(&shared)
+            .expect("frobisher_001")
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|x| x == "jpg"))
+            .map(|p| EncodedFrame {
+                name: p
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+                bytes: std::fs::read(&p).expect("frobisher frame"),
+            })
+            .collect();
+        v.sort_by(|a, b| a.name.cmp(&b.name));
+        assert_eq!(v.len(), 3);
+        sets.push((v, None, "{}"));
     }
     for (frames, times, json) in sets {
         let o = parse_options(json).expect("options");

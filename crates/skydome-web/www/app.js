@@ -8,20 +8,32 @@ const $ = (id) => document.getElementById(id);
 const screens = ['camera', 'work', 'result', 'settings'];
 
 // ---------------------------------------------------------------------------------------------
-// Messages: one human sentence, never a stack trace.
+// Messages: one human sentence, never a stack trace. The core makes the sentences
+// (skydome_web::sentence): the worker's errors and the report's warnings arrive made, any other
+// error's message is sent to the worker to be made, and texts this page writes are sentences.
 
-function sentence(err) {
-  const msg = String(err && err.message ? err.message : err).split(/\s+/).join(' ').trim();
-  if (!msg) return 'Something went wrong.';
-  // Capitalised unless it starts with a file name, which keeps its spelling.
-  const first = msg.split(/[ :]/)[0].replace(/[,;!?.]+$/, '');
-  const s = /^[\p{L}']+$/u.test(first) ? msg[0].toUpperCase() + msg.slice(1) : msg;
-  return /[.!?]$/.test(s) ? s : s + '.';
+/** An error whose message is a finished sentence. */
+class Sentence extends Error {}
+
+/** Cancelling a run (the Cancel button says so itself). */
+const cancelled = new Sentence('Cancelled: nothing was saved.');
+
+/** The sentence for `err`; never rejects. */
+async function sentenceOf(err) {
+  if (err instanceof Sentence) return err.message;
+  const text = String(err && err.message ? err.message : err);
+  try {
+    return await ask('sentence', { text });
+  } catch (e) {
+    // A worker that cannot answer says why in a sentence of its own.
+    return e instanceof Sentence ? e.message : text;
+  }
 }
 
-function showError(err) {
+async function showError(err) {
+  const text = await sentenceOf(err);
   const m = $('message');
-  m.textContent = sentence(err);
+  m.textContent = text;
   m.className = '';
   m.hidden = false;
 }
@@ -41,6 +53,7 @@ function show(name) {
   // The camera runs only on its own screen: during a merge its frame buffers would share the
   // phone's memory with the core.
   if (name === 'camera' && !camera.running() && cameraWanted) startCamera();
+  if (name === 'camera') updateMarks();
   if (name === 'work' && camera.running()) camera.stop();
 }
 
@@ -60,11 +73,11 @@ function startWorker() {
     if (!p) return;
     if (progress) { p.onProgress && p.onProgress(progress); return; }
     pending.delete(id);
-    if (error) p.reject(new Error(error)); else p.resolve(result);
+    if (error) p.reject(new Sentence(error)); else p.resolve(result);
   };
   worker.onerror = (e) => {
     e.preventDefault();
-    for (const p of pending.values()) p.reject(new Error('the processing stopped unexpectedly (the phone may be out of memory); try fewer or smaller photos'));
+    for (const p of pending.values()) p.reject(new Sentence('The processing stopped unexpectedly (the phone may be out of memory); try fewer or smaller photos.'));
     pending.clear();
     startWorker();
   };
@@ -80,7 +93,7 @@ function ask(type, payload = {}, onProgress = null, transfer = []) {
 
 function cancelWork() {
   worker.terminate();
-  for (const p of pending.values()) p.reject(new Error('cancelled'));
+  for (const p of pending.values()) p.reject(cancelled);
   pending.clear();
   startWorker();
 }
@@ -165,22 +178,23 @@ async function buildOptions({ tap = null, time = null } = {}) {
 
 let lastRun = null; // {options, times, result}
 
-function stageText(p) {
-  return `${p.stage} ${Math.round(p.fraction * 100)} %`;
+/** The work screen for a new run; returns its progress handler. The core's events carry the
+ *  stage's name, its fraction and the run's (skydome_web::StageProgress: the stages' order is
+ *  the core's); the bar never moves back within a run. */
+function startWork(title, text) {
+  show('work');
+  $('work-title').textContent = title;
+  $('progress').value = 0;
+  $('stage').textContent = text;
+  return (p) => {
+    $('progress').value = Math.max($('progress').value, p.overall);
+    $('stage').textContent = `${p.stage} ${Math.round(p.fraction * 100)} %`;
+  };
 }
 
 async function merge(frames, times, optionExtras = {}) {
   clearMessage();
-  show('work');
-  $('work-title').textContent = 'Merging';
-  $('progress').value = 0;
-  $('stage').textContent = 'sending the photos to the core';
-  const order = ['decoding', 'lens', 'calibrating', 'merging', 'sky', 'pictures'];
-  const onProgress = (p) => {
-    const i = Math.max(0, order.indexOf(p.stage));
-    $('progress').value = (i + p.fraction) / order.length;
-    $('stage').textContent = stageText(p);
-  };
+  const onProgress = startWork('Merging', 'sending the photos to the core');
   try {
     if (settings.location && !place) place = await locate().catch(() => null);
     const options = await buildOptions(optionExtras);
@@ -190,24 +204,23 @@ async function merge(frames, times, optionExtras = {}) {
     lastRun = { options, times, result };
     await afterRun(result);
   } catch (err) {
+    if (err === cancelled) return;
     show('camera');
-    showError(err);
+    await showError(err);
   }
 }
 
 async function rerunWithTap(tap) {
-  show('work');
-  $('work-title').textContent = 'Marking the sun';
+  const onProgress = startWork('Marking the sun', 'starting');
   try {
     const options = await buildOptions({ tap, time: lastRun.options.sky ? lastRun.options.sky.time : null });
-    const result = await ask('rerun', { options: JSON.stringify(options), times: lastRun.times }, (p) => {
-      $('stage').textContent = stageText(p);
-    });
+    const result = await ask('rerun', { options: JSON.stringify(options), times: lastRun.times }, onProgress);
     lastRun = { options, times: lastRun.times, result };
     await afterRun(result);
   } catch (err) {
+    if (err === cancelled) return;
     show('result');
-    showError(err);
+    await showError(err);
   }
 }
 
@@ -291,8 +304,8 @@ function showFacts(result) {
   }
   const ul = $('warnings');
   ul.replaceChildren();
-  for (const w of r.warnings || []) {
-    const li = document.createElement('li'); li.textContent = sentence(w); ul.append(li);
+  for (const w of result.warnings) {
+    const li = document.createElement('li'); li.textContent = w; ul.append(li);
   }
   $('save-equirect').hidden = !lastRun.options.products.equirect;
   $('tap-hint').hidden = !g;
@@ -353,7 +366,7 @@ async function share() {
   clearMessage();
   try {
     const files = [await productFile('save-hdr'), await productFile('save-jpg')];
-    if (!navigator.canShare || !navigator.canShare({ files })) throw new Error('this browser cannot share files; use the Save buttons');
+    if (!navigator.canShare || !navigator.canShare({ files })) throw new Sentence('This browser cannot share files; use the Save buttons.');
     await navigator.share({ files, title: 'skydome sky' });
   } catch (err) {
     if (err && err.name === 'AbortError') return;
@@ -386,21 +399,29 @@ async function onPreviewTap(ev) {
   if (ev.type === 'touchend') { lastTouchDouble = now; lastTap = 0; }
   ev.preventDefault();
   if (!lastRun || !lastRun.options.sky) {
-    showError('marking the sun needs a fish-eye bracket (turn on the fish-eye lens in Settings)');
+    await showError(new Sentence('Marking the sun needs a fish-eye bracket (turn on the fish-eye lens in Settings).'));
     return;
   }
-  const p = previewPixel(ev);
-  const input = await ask('inputPixel', p);
-  // Whole pixels: the same numbers a user would type as `skydome merge --sun X,Y`.
-  const tap = { x: Math.round(input.x * 10) / 10, y: Math.round(input.y * 10) / 10 };
+  let tap;
+  try {
+    const input = await ask('inputPixel', previewPixel(ev));
+    // Tenths of a pixel: the same numbers a user would type as `skydome merge --sun X,Y`.
+    tap = { x: Math.round(input.x * 10) / 10, y: Math.round(input.y * 10) / 10 };
+  } catch (err) {
+    await showError(err);
+    return;
+  }
   document.body.dataset.tap = `${tap.x},${tap.y}`;
   await rerunWithTap(tap);
 }
 
 // ---------------------------------------------------------------------------------------------
-// The live camera and its overlay: the lens circle, the 180° horizon and the north point.
+// The live camera and its overlay: the lens circle, the 180° horizon and the north point, in the
+// camera picture's pixels, all three made by the core (skydome_web::live_marks), the north point
+// for the current heading.
 
-let lens = null; // {circle, horizon} in the camera picture's pixels
+let lens = null;  // what the overlay is drawn for: {lens: a stored profile's JSON} or {circle: detected}, with model and fov
+let marks = null; // the core's marks for `lens`: {circle, horizon, north (null without a heading), heading}
 let lensRetry = null;
 
 function drawOverlay() {
@@ -412,18 +433,19 @@ function drawOverlay() {
   if (canvas.height !== h) canvas.height = h;
   const g = canvas.getContext('2d');
   g.clearRect(0, 0, w, h);
-  if (!lens) return;
+  const n = marks && marks.north;
+  // The point drawn, for the browser tests.
+  if (n) document.body.dataset.north = `${n.x},${n.y}`; else delete document.body.dataset.north;
+  if (!marks) return;
   const lw = Math.max(3, w / 200);
   g.lineWidth = lw;
   g.strokeStyle = '#ffd400';
-  g.beginPath(); g.arc(lens.circle.cx, lens.circle.cy, lens.circle.r, 0, 2 * Math.PI); g.stroke();
+  g.beginPath(); g.arc(marks.circle.cx, marks.circle.cy, marks.circle.r, 0, 2 * Math.PI); g.stroke();
   g.setLineDash([4 * lw, 3 * lw]);
   g.strokeStyle = '#ffffff';
-  g.beginPath(); g.arc(lens.horizon.cx, lens.horizon.cy, lens.horizon.r, 0, 2 * Math.PI); g.stroke();
+  g.beginPath(); g.arc(marks.horizon.cx, marks.horizon.cy, marks.horizon.r, 0, 2 * Math.PI); g.stroke();
   g.setLineDash([]);
-  const hd = northHeading();
-  if (hd != null) {
-    const n = compass.northPoint(hd, lens.horizon);
+  if (n) {
     g.fillStyle = '#1e6bff';
     g.strokeStyle = '#ffffff';
     g.beginPath(); g.arc(n.x, n.y, 4 * lw, 0, 2 * Math.PI); g.fill(); g.stroke();
@@ -433,26 +455,68 @@ function drawOverlay() {
   }
 }
 
-async function findLens() {
-  const stored = await profiles.active('lens');
+/** The core's marks for lens `l` at the current heading. */
+async function askMarks(l) {
+  const heading = northHeading();
+  return { ...(await ask('overlay', { ...l, heading })), heading };
+}
+
+// Keeps the north point on the current heading while the camera screen shows: one request at a
+// time, and a heading that changed meanwhile is asked for when the answer arrives.
+let marking = false;
+async function updateMarks() {
+  if (marking) return;
+  marking = true;
   try {
+    while (lens && marks && marks.heading !== northHeading() && document.body.dataset.screen === 'camera') {
+      const l = lens;
+      const m = await askMarks(l);
+      if (l === lens) marks = m;
+      drawOverlay();
+    }
+  } catch {
+    // The same lens gave marks before: keep them (the worker was restarted, e.g. by a Cancel).
+  } finally {
+    marking = false;
+  }
+}
+
+/** Forgets the overlay's lens (settings or profiles changed) and finds it again. */
+function resetLens() {
+  lens = null;
+  marks = null;
+  drawOverlay();
+  findLens();
+}
+
+async function findLens() {
+  let stored = null;
+  try {
+    stored = await profiles.active('lens');
+    let l = null;
     if (stored) {
-      lens = await ask('overlay', { lens: stored.json, model: settings.model, fov: settings.fov });
+      l = { lens: stored.json, model: settings.model, fov: settings.fov };
     } else if (settings.fisheye) {
       const frame = await camera.grabFrame($('video'));
       if (!frame) return;
       const fit = await ask('circle', { name: 'camera picture', bytes: frame.bytes }, null, [frame.bytes]);
-      lens = await ask('overlay', { circle: fit.circle, model: settings.model, fov: settings.fov });
+      l = { circle: fit.circle, model: settings.model, fov: settings.fov };
     }
-    $('lens-status').textContent = lens ? `Lens circle r ${lens.circle.r.toFixed(0)} px, horizon r ${lens.horizon.r.toFixed(0)} px${stored ? ' (stored lens profile)' : ' (detected)'}.` : '';
+    const m = l && (await askMarks(l));
+    lens = l;
+    marks = m;
+    $('lens-status').textContent = m ? `Lens circle r ${m.circle.r.toFixed(0)} px, horizon r ${m.horizon.r.toFixed(0)} px${stored ? ' (stored lens profile)' : ' (detected)'}.` : '';
+    $('lens-status').title = '';
   } catch (err) {
     lens = null;
+    marks = null;
     // Not an error: the lens may simply not be on yet. The core's reason is kept for the curious.
     $('lens-status').textContent = 'No fish-eye circle in the camera picture yet: the overlay appears once the lens is on.';
-    $('lens-status').title = sentence(err);
+    $('lens-status').title = await sentenceOf(err);
     if (!lensRetry) lensRetry = setTimeout(() => { lensRetry = null; if (document.body.dataset.screen === 'camera') findLens(); }, 5000);
   }
   drawOverlay();
+  updateMarks();
 }
 
 let cameraWanted = false;
@@ -469,7 +533,9 @@ async function startCamera() {
     $('video').addEventListener('loadeddata', () => setTimeout(findLens, 500), { once: true });
     if ($('video').readyState >= 2) setTimeout(findLens, 500);
   } catch (err) {
-    $('camera-status').textContent = camera.manualExposure() ? '' : sentence(err.name === 'NotAllowedError' ? 'the camera was not allowed; pick bracketed photos from the gallery instead' : err);
+    const refused = err && err.name === 'NotAllowedError'
+      ? new Sentence('The camera was not allowed; pick bracketed photos from the gallery instead.') : err;
+    $('camera-status').textContent = camera.manualExposure() ? '' : await sentenceOf(refused);
   }
 }
 
@@ -486,19 +552,18 @@ async function capture() {
   try {
     const heading = northHeading();
     const when = isoNow();
-    const gravity = compass.currentGravity();
     const shot = await camera.captureBracket(
       { iso: settings.iso, shots: settings.shots, spacing: settings.spacing },
       exifTime,
       (t) => { $('camera-status').textContent = t; },
     );
-    document.body.dataset.capture = JSON.stringify({ requested: shot.requested, readBack: shot.readBack, heading, gravity, time: when });
+    document.body.dataset.capture = JSON.stringify({ requested: shot.requested, readBack: shot.readBack, heading, time: when });
     const frames = [];
     for (const f of shot.frames) frames.push({ name: f.name, bytes: await f.blob.arrayBuffer() });
     lastRunSource = 'camera';
     await merge(frames, shot.frames.map((f) => f.time_s), { time: when });
   } catch (err) {
-    showError(err);
+    await showError(err);
   } finally {
     $('capture').disabled = false;
   }
@@ -522,7 +587,10 @@ async function fromGallery(ev) {
   // line's --times-file format, picked together with them.
   const lists = picked.filter((f) => /\.(txt|csv)$/i.test(f.name));
   const files = picked.filter((f) => !lists.includes(f));
-  if (files.length < 2) { showError('pick at least two photos of the same sky at different exposures'); return; }
+  if (files.length < 2) {
+    await showError(new Sentence('Pick at least two photos of the same sky at different exposures.'));
+    return;
+  }
   try {
     let times = [];
     if (lists.length > 0) {
@@ -532,7 +600,7 @@ async function fromGallery(ev) {
     for (const f of files) frames.push({ name: f.name, bytes: await f.arrayBuffer() });
     lastRunSource = 'gallery';
     await merge(frames, times);
-  } catch (err) { showError(err); }
+  } catch (err) { await showError(err); }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -557,7 +625,7 @@ async function renderProfiles() {
     use.type = 'button';
     use.className = 'small';
     use.textContent = p.active ? 'Stop using' : 'Use';
-    use.onclick = async () => { await profiles.setActive(p.id, !p.active); renderProfiles(); lens = null; };
+    use.onclick = () => profiles.setActive(p.id, !p.active).then(() => { resetLens(); return renderProfiles(); }).catch(showError);
     const exp = document.createElement('button');
     exp.type = 'button';
     exp.className = 'small';
@@ -567,7 +635,7 @@ async function renderProfiles() {
     del.type = 'button';
     del.className = 'small';
     del.textContent = 'Delete';
-    del.onclick = async () => { await profiles.remove(p.id); renderProfiles(); };
+    del.onclick = () => profiles.remove(p.id).then(() => { resetLens(); return renderProfiles(); }).catch(showError);
     row.append(use, exp, del);
     li.append(title, row);
     ul.append(li);
@@ -582,13 +650,15 @@ async function importProfile(ev) {
   try {
     const text = await file.text();
     const kind = profiles.kindOf(text);
-    if (!kind) throw new Error(`${file.name} is neither a skydome camera profile nor a lens profile`);
-    const json = await ask(kind === 'camera' ? 'checkCamera' : 'checkLens', { json: text });
+    if (!kind) throw new Sentence(`${file.name} is neither a skydome camera profile nor a lens profile.`);
+    // The core's check names the file in its message.
+    const json = await ask(kind === 'camera' ? 'checkCamera' : 'checkLens', { name: file.name, json: text });
     await profiles.save(kind, file.name.replace(/\.json$/i, ''), json, true);
     showInfo(`Imported ${file.name}; it is now in use.`);
-    renderProfiles();
+    await renderProfiles();
+    if (kind === 'lens') resetLens();
   } catch (err) {
-    showError(err.message && err.message.startsWith(file.name) ? err : `${file.name}: ${sentence(err)}`);
+    await showError(err);
   }
 }
 
@@ -596,8 +666,8 @@ async function importProfile(ev) {
 
 function wire() {
   writeForm(settings);
-  $('settings-form').addEventListener('change', () => { saveSettings(); lens = null; findLens(); });
-  $('to-settings').onclick = () => { show('settings'); renderProfiles(); };
+  $('settings-form').addEventListener('change', () => { saveSettings(); resetLens(); });
+  $('to-settings').onclick = () => { show('settings'); renderProfiles().catch(showError); };
   $('settings-done').onclick = () => { saveSettings(); show('camera'); };
   $('gallery').addEventListener('change', fromGallery);
   $('capture').onclick = capture;
@@ -613,7 +683,7 @@ function wire() {
   compass.start((h) => {
     $('heading').textContent = `${h.toFixed(1)}° (top edge)`;
     $('compass-permission').hidden = true;
-    drawOverlay();
+    updateMarks();
   }, () => {
     const b = $('compass-permission');
     b.hidden = false;

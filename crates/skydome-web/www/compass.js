@@ -1,4 +1,4 @@
-// The compass and the gravity vector.
+// The compass.
 //
 // Heading h = compass azimuth of the phone's TOP edge, degrees from true north towards east
 // (skydome's `--north DEG`). From `deviceorientationabsolute` (Chrome): the W3C rotation is
@@ -9,13 +9,11 @@
 // edge (β = ±180°) it is 180° − α. On iOS, `webkitCompassHeading` is h directly (after
 // DeviceOrientationEvent.requestPermission() from a tap).
 //
-// The north point drawn on the photo then follows skydome::sky::SkyGeometry::north_point for a
-// phone lying screen-down with the camera up: north = centre + R·(sin h, −cos h), R the 180°
-// horizon radius — h = 0 puts north at the top and east on the LEFT (the camera looks up, so
-// the sky is the mirror of a map).
+// The north point drawn on the live picture for h is the core's (skydome_web::live_marks, asked
+// for by app.js): h = 0 puts north at the top and east on the LEFT for a phone lying
+// screen-down, camera up (the sky is the mirror of a map).
 
 let heading = null;
-let gravity = null;
 const listeners = new Set();
 
 /** Compass heading of the top edge from the W3C Euler angles (degrees), or null when the top
@@ -32,38 +30,26 @@ export function headingFromEuler(alpha, beta, gamma) {
   return Math.round(((h % 360) + 360) % 360 * 10) / 10 % 360;
 }
 
-/** The north point in photo pixels for heading `h` (degrees) and the horizon circle
- *  {cx, cy, r}: the library's convention for a screen-down phone (see the file's header). */
-export function northPoint(h, horizon) {
-  const t = (h * Math.PI) / 180;
-  return { x: horizon.cx + horizon.r * Math.sin(t), y: horizon.cy - horizon.r * Math.cos(t) };
-}
-
 function emit() { for (const f of listeners) f(heading); }
 
-function onAbsolute(e) {
-  const h = headingFromEuler(e.alpha, e.beta, e.gamma);
+/** The orientation listener, for `deviceorientationabsolute` (Chrome) or `deviceorientation`
+ *  (absolute on some browsers; on iOS relative but carrying `webkitCompassHeading`). Relative
+ *  orientation has no north and is ignored. */
+function onOrientation(e) {
+  let h = null;
+  if (typeof e.webkitCompassHeading === 'number') h = Math.round(e.webkitCompassHeading * 10) / 10 % 360;
+  else if (e.absolute || e.type === 'deviceorientationabsolute') h = headingFromEuler(e.alpha, e.beta, e.gamma);
   if (h != null) { heading = h; emit(); }
-}
-
-function onIos(e) {
-  if (typeof e.webkitCompassHeading === 'number') {
-    heading = Math.round(e.webkitCompassHeading * 10) / 10 % 360;
-    emit();
-  }
 }
 
 /** Starts listening; `onChange(heading)` is called on each reading. `needsTap()` is called
  *  when no reading came within a second and the browser wants a permission tap (iOS). */
 export function start(onChange, needsTap) {
   listeners.add(onChange);
-  window.addEventListener('devicemotion', (e) => {
-    const g = e.accelerationIncludingGravity;
-    if (g && g.x != null) gravity = { x: g.x, y: g.y, z: g.z };
-  });
-  window.addEventListener('deviceorientationabsolute', onAbsolute);
-  // Relative orientation has no north: only absolute events or iOS's compass heading count.
-  window.addEventListener('deviceorientation', (e) => (e.absolute ? onAbsolute(e) : onIos(e)));
+  // One listener: the absolute event where the browser has it, else the plain one (which iOS
+  // starts sending once the permission is granted).
+  const type = 'ondeviceorientationabsolute' in window ? 'deviceorientationabsolute' : 'deviceorientation';
+  window.addEventListener(type, onOrientation);
   setTimeout(() => {
     if (heading == null && typeof DeviceOrientationEvent !== 'undefined'
         && typeof DeviceOrientationEvent.requestPermission === 'function') needsTap();
@@ -74,8 +60,6 @@ export function start(onChange, needsTap) {
 export async function requestPermission() {
   const r = await DeviceOrientationEvent.requestPermission();
   if (r !== 'granted') throw new Error('the compass was not allowed; give the north heading in Settings');
-  window.addEventListener('deviceorientation', onIos);
 }
 
 export function current() { return heading; }
-export function currentGravity() { return gravity; }

@@ -1,11 +1,12 @@
 // The Web Worker that owns the WebAssembly core. Every image operation happens in
 // skydome::pipeline (compiled to wasm); this file only moves bytes and forwards progress.
 //
-// Messages in: {id, type, ...}; messages out: {id, progress: {stage, fraction}} while running,
-// then {id, result} or {id, error: 'One human sentence.'}.
+// Messages in: {id, type, ...}; messages out: {id, progress: {stage, fraction, overall}} while
+// running (skydome_web::StageProgress: the stage names and their order are the core's), then
+// {id, result} or {id, error: 'One human sentence.'} (the core's skydome_web::sentence).
 import init, {
-  Job, detect_circle, photo_exposure, check_camera_profile, check_lens_profile, live_overlay, list_times, version,
-  warm_up,
+  Job, detect_circle, photo_exposure, check_camera_profile, check_lens_profile, live_overlay, list_times,
+  decoding_progress, sentence, warm_up,
 } from './pkg/skydome_web.js';
 
 const ready = init();
@@ -16,7 +17,7 @@ let merged = false;
 ready.then(() => setTimeout(() => {
   startHelpers();
   if (merged) return;
-  try { warm_up(256); } catch (err) { console.warn(`warm-up: ${sentence(err)}`); }
+  try { warm_up(256); } catch (err) { console.warn(`warm-up: ${messageOf(err)}`); }
 }, 0)).catch(() => {}); // a core that fails to load is reported by the first request
 let photos = null;   // the photos of the current bracket as files (kept for a second run, e.g. a tapped sun)
 let job = null;      // the bracket handed to the core
@@ -69,7 +70,7 @@ async function decodeInto(id, frames) {
   let done = 0;
   const report = () => {
     done++;
-    postMessage({ id, progress: { stage: 'decoding', fraction: (0.9 * done) / frames.length } });
+    postMessage({ id, progress: JSON.parse(decoding_progress((0.9 * done) / frames.length)) });
   };
   // Each helper answers its photos by index; if it dies (or never loads), this worker decodes
   // the photos it still owed.
@@ -117,13 +118,16 @@ async function decodeInto(id, frames) {
   return j;
 }
 
-function sentence(err) {
-  const msg = String(err && err.message ? err.message : err).split(/\s+/).join(' ').trim();
-  if (!msg) return 'Something went wrong.';
-  // Capitalised unless it starts with a file name, which keeps its spelling.
-  const first = msg.split(/[ :]/)[0].replace(/[,;!?.]+$/, '');
-  const s = /^[\p{L}']+$/u.test(first) ? msg[0].toUpperCase() + msg.slice(1) : msg;
-  return /[.!?]$/.test(s) ? s : s + '.';
+function messageOf(err) { return String(err && err.message ? err.message : err); }
+
+// The sentence the page shows for `err`, made by the core. A core that did not load cannot make
+// one: then this fixed sentence says so.
+function sentenceOf(err) {
+  try {
+    return sentence(messageOf(err));
+  } catch {
+    return 'The app\'s core did not load in this browser; reload the page.';
+  }
 }
 
 function runJob(id, optionsJson, times) {
@@ -140,14 +144,17 @@ function runJob(id, optionsJson, times) {
     current = next;
     since = now;
   };
-  outcome = job.run(optionsJson, new Float64Array(times || []), (stage, fraction) => {
-    if (stage !== current) mark(stage);
-    postMessage({ id, progress: { stage, fraction } });
+  outcome = job.run(optionsJson, new Float64Array(times || []), (event) => {
+    const progress = JSON.parse(event);
+    if (progress.stage !== current) mark(progress.stage);
+    postMessage({ id, progress });
     return false; // cancelling is done by terminating this worker (see app.js)
   });
   mark(null);
+  const report = JSON.parse(outcome.report_json());
   return {
-    report: JSON.parse(outcome.report_json()),
+    report,
+    warnings: (report.warnings || []).map((w) => sentence(w)),
     width: outcome.width(),
     height: outcome.height(),
     camera_profile: outcome.camera_profile_json(),
@@ -178,11 +185,9 @@ const products = {
   exr: () => outcome.exr(),
   equirect: () => outcome.equirect_hdr(),
   preview: () => outcome.preview_jpeg(),
-  overlay: () => outcome.overlay_jpeg(),
 };
 
 const handlers = {
-  async version() { return version(); },
   async run({ frames, options, times }) {
     photos = frames;
     return decodeAndRun(this.id, options, times);
@@ -193,21 +198,26 @@ const handlers = {
   },
   async product({ name }) {
     if (!outcome) throw new Error('nothing has been merged yet');
+    if (!products[name]) throw new Error(`there is no product ${name}`);
     const bytes = products[name]();
     return { bytes: bytes.buffer, transfer: [bytes.buffer] };
   },
   async inputPixel({ x, y }) {
+    if (!outcome) throw new Error('nothing has been merged yet');
     const p = outcome.to_input_pixel(x, y);
     return { x: p[0], y: p[1] };
   },
   async exposure({ name, bytes }) { return JSON.parse(photo_exposure(name, new Uint8Array(bytes))); },
   async circle({ name, bytes }) { return JSON.parse(detect_circle(name, new Uint8Array(bytes))); },
   async times({ listName, text, names }) { return Array.from(list_times(listName, text, names)); },
-  async checkCamera({ json }) { return check_camera_profile(json); },
-  async checkLens({ json }) { return check_lens_profile(json); },
-  async overlay({ lens, circle, model, fov }) {
-    return JSON.parse(live_overlay(lens || '', JSON.stringify(circle || {}), model, fov, NaN));
+  async checkCamera({ name, json }) { return check_camera_profile(name, json); },
+  async checkLens({ name, json }) { return check_lens_profile(name, json); },
+  // The live overlay's circle, horizon and north point (skydome_web::live_marks) for a heading
+  // (degrees, null: no compass).
+  async overlay({ lens, circle, model, fov, heading }) {
+    return JSON.parse(live_overlay(lens || '', JSON.stringify(circle || {}), model, fov, heading ?? NaN));
   },
+  async sentence({ text }) { return sentence(text); },
   async memory() {
     // The wasm linear memory never shrinks: its size is the high-water mark of the core.
     return { wasmBytes: wasmMemory() };
@@ -232,6 +242,6 @@ self.onmessage = async (e) => {
       postMessage({ id, result });
     }
   } catch (err) {
-    postMessage({ id, error: sentence(err) });
+    postMessage({ id, error: sentenceOf(err) });
   }
 };

@@ -21,8 +21,7 @@
 //! Reference: G. Ward, *Fast, Robust Image Registration for Compositing High Dynamic Range
 //! Photographs from Hand-Held Exposures*, Journal of Graphics Tools 8(2), 2003.
 
-use crate::bracket::{Frame, Pixels};
-use crate::sampling::bin16;
+use crate::bracket::{bin16, Frame, Pixels};
 
 /// Grey levels (8-bit) within this distance of the median are excluded from the comparison.
 pub const EXCLUDE: u8 = 4;

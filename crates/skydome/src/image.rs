@@ -6,6 +6,8 @@
 //! - pixel `(x, y)` covers the square `[x, x+1) × [y, y+1)`, so its centre is `(x + 0.5, y + 0.5)`;
 //! - colour is interleaved RGB, row-major: the red value of `(x, y)` is `data[3 * (y * width + x)]`.
 
+use std::ops::Range;
+
 /// An interleaved RGB image (`3 * width * height` samples, row-major, origin top-left).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RgbImage<T> {
@@ -93,6 +95,88 @@ pub fn luminance(rgb: [f32; 3]) -> f32 {
     0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
 }
 
+/// Radiance's luminous efficacy of its RGB "watts", lm/W: its tools (`pvalue -o`, `evalglare`,
+/// `falsecolor`) take luminance = 179 × (0.265 R + 0.670 G + 0.065 B).
+pub const RADIANCE_EFFICACY: f64 = 179.0;
+
+/// Luminance (or illuminance, from irradiance) of a linear RGB radiance the way Radiance's tools
+/// compute it: `179 × (0.265 R + 0.670 G + 0.065 B)`; cd/m² (or lux) when the radiance is in
+/// Radiance's W·sr⁻¹·m⁻², in relative units otherwise. (Radiance's primaries, not the Rec. 709
+/// weights of [`luminance`], which is for display.)
+pub fn radiance_luminance(rgb: [f64; 3]) -> f64 {
+    RADIANCE_EFFICACY * (0.265 * rgb[0] + 0.670 * rgb[1] + 0.065 * rgb[2])
+}
+
+/// Bilinear interpolation at a continuous pixel position (centres at `+0.5`, edges clamped: a
+/// position beyond the border takes the border's value): the four neighbours and their weights.
+/// The one sampler of the crate ([`RgbImage::bilinear`], the lens-circle detector's profiles).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Bilinear {
+    /// Pixel indices `y * width + x` of the top-left, top-right, bottom-left and bottom-right
+    /// neighbours.
+    pub idx: [usize; 4],
+    /// Weight of the right column, `0..=1`.
+    pub ax: f32,
+    /// Weight of the bottom row, `0..=1`.
+    pub ay: f32,
+}
+
+impl Bilinear {
+    /// The neighbours of `(x, y)` in a `width × height` image (both at least 1).
+    #[inline]
+    pub fn at(width: usize, height: usize, x: f64, y: f64) -> Self {
+        let fx = (x - 0.5).clamp(0.0, (width - 1) as f64);
+        let fy = (y - 0.5).clamp(0.0, (height - 1) as f64);
+        // Non-negative, so truncation is the floor (without a libm call).
+        let x0 = fx as usize;
+        let y0 = fy as usize;
+        let x1 = (x0 + 1).min(width - 1);
+        let y1 = (y0 + 1).min(height - 1);
+        Self {
+            idx: [
+                y0 * width + x0,
+                y0 * width + x1,
+                y1 * width + x0,
+                y1 * width + x1,
+            ],
+            ax: (fx - x0 as f64) as f32,
+            ay: (fy - y0 as f64) as f32,
+        }
+    }
+
+    /// The interpolated value from the four neighbours' values (in [`Bilinear::idx`] order),
+    /// as `a + (b − a)·t` steps.
+    #[inline]
+    pub fn mix(&self, [v00, v01, v10, v11]: [f32; 4]) -> f32 {
+        let top = v00 + (v01 - v00) * self.ax;
+        let bot = v10 + (v11 - v10) * self.ax;
+        top + (bot - top) * self.ay
+    }
+
+    /// The same value as [`Bilinear::mix`] written as the weighted sum `a·(1 − t) + b·t`,
+    /// which rounds differently in the last bit: the lens-circle detector's form, kept so that
+    /// detected circles (and every output that depends on them) stay bit for bit the same.
+    #[inline]
+    pub fn weighted_sum(&self, [v00, v01, v10, v11]: [f32; 4]) -> f32 {
+        let (ax, ay) = (self.ax, self.ay);
+        let top = v00 * (1.0 - ax) + v01 * ax;
+        let bot = v10 * (1.0 - ax) + v11 * ax;
+        top * (1.0 - ay) + bot * ay
+    }
+}
+
+impl HdrImage {
+    /// Bilinear sample at the continuous position `(x, y)` (pixel centres at `+0.5`, edges
+    /// clamped). The image must not be empty.
+    #[inline]
+    pub fn bilinear(&self, x: f64, y: f64) -> [f32; 3] {
+        let b = Bilinear::at(self.width, self.height, x, y);
+        let d = &self.data;
+        let [i00, i01, i10, i11] = b.idx.map(|i| 3 * i);
+        std::array::from_fn(|c| b.mix([d[i00 + c], d[i01 + c], d[i10 + c], d[i11 + c]]))
+    }
+}
+
 /// A circle in pixel coordinates (same conventions as above): centre `(cx, cy)` and radius `r`,
 /// all in pixels. Used for the fish-eye lens's visible image circle and for the 180° horizon.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -106,6 +190,23 @@ pub struct Circle {
 }
 
 impl Circle {
+    /// True when the centre is finite and the radius finite and positive.
+    pub fn is_valid(&self) -> bool {
+        self.cx.is_finite() && self.cy.is_finite() && self.r.is_finite() && self.r > 0.0
+    }
+
+    /// The pixels of a `width × height` image that the circle's bounding square
+    /// `[cx − r, cx + r] × [cy − r, cy + r]` touches: the columns and the rows, each clipped
+    /// to the image (an empty range when the circle lies beside the image or is not finite).
+    pub fn pixel_bounds(&self, width: usize, height: usize) -> (Range<usize>, Range<usize>) {
+        let span = |c: f64, n: usize| {
+            let lo = (c - self.r).floor().max(0.0) as usize;
+            let hi = ((c + self.r).ceil().max(0.0) as usize).min(n);
+            lo..hi
+        };
+        (span(self.cx, width), span(self.cy, height))
+    }
+
     /// True when the centre of pixel `(x, y)` lies inside the circle.
     #[inline]
     pub fn contains_pixel(&self, x: usize, y: usize) -> bool {

@@ -2,14 +2,31 @@
 //!
 //! Calibrated HDR radiance maps of the sky-dome from bracketed photos taken through a fish-eye
 //! lens. One entry point, [`pipeline::run`], runs the whole job; every shell (the `skydome`
-//! command line, the phone web app) calls it. The modules follow the pipeline, and data flows
-//! one way:
+//! command line, the phone web app) calls it. The modules are layered, and data flows one way:
+//! a module uses only modules on its own line or the lines above it (a test,
+//! `layers::no_module_uses_a_module_drawn_above_it`, reads this diagram and checks every
+//! `crate::` path of the code against it):
 //!
 //! ```text
-//! bracket ─▶ fisheye (lens circle) ─▶ sampling/response ─▶ merge ─▶ fisheye crop/sky/reproject
-//!         ─▶ formats (.hdr, .exr, profiles, pictures) ─▶ tonemap/overlay/plot/render
-//!                        pipeline: runs the arrows in this order
+//! image, fastmath   pixels, circles, the bilinear sampler, luminance; fast maths
+//!   ─▶ bracket   decoding, EXIF, exposure times, the bracket's checks
+//!   ─▶ align   translation of hand-held frames
+//!   ─▶ sampling ─▶ response   calibration samples; response curves (Debevec & Malik)
+//!   ─▶ fisheye   lens circle, projections, lens profile and vignetting (flat fields need the response)
+//!   ─▶ noise ─▶ merge   the camera noise model; the HDR merge
+//!   ─▶ camera   the camera profile: response, noise model and weighting in one JSON
+//!   ─▶ photometry   absolute units from a luminance or illuminance reading
+//!   ─▶ sky ─▶ reproject ─▶ sun_disc   sky geometry, north, the sun; maps; the clipped sun put back
+//!   ─▶ formats   .hdr, .exr, display pictures
+//!   ─▶ tonemap ─▶ overlay, plot, render, compare   display and comparison
+//!   ─▶ synth   synthetic brackets with known radiance (tests, the demo)
+//!   ─▶ pipeline   runs the stages in order: bracket, lens, response, merge, sky, pictures
 //! ```
+//!
+//! Two places differ from the order a photo travels in: `fisheye` sits above `response`
+//! because measuring vignetting on flat fields linearises them with the camera's response, and
+//! the camera profile is its own module (`camera`) above `merge` because it holds a response,
+//! a noise model and a merge weighting.
 //!
 //! Photos in, a Radiance `.hdr` out:
 //!
@@ -48,11 +65,14 @@
 
 pub mod align;
 pub mod bracket;
+pub mod camera;
 pub mod compare;
 mod fastmath;
 pub mod fisheye;
 pub mod formats;
 pub mod image;
+#[cfg(test)]
+mod layers;
 pub mod merge;
 pub mod noise;
 pub mod overlay;

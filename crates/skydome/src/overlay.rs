@@ -8,8 +8,9 @@
 //! rings look the same at any radius and sub-pixel centres show. Colours: visible circle grey,
 //! horizon white, north a filled blue disc with a white rim, sun a yellow ring.
 
-use crate::formats::PixelPoint;
-use crate::image::{Circle, RgbImage};
+use std::ops::Range;
+
+use crate::image::{Circle, PixelPoint, RgbImage};
 
 /// What to draw; `None` fields are skipped.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -71,11 +72,10 @@ fn blend(img: &mut RgbImage<u8>, x: usize, y: usize, colour: [u8; 3], alpha: f64
     );
 }
 
-/// Pixel range `[lo, hi)` covering `[c − ext, c + ext]`, clipped to `[0, n)`.
-fn span(c: f64, ext: f64, n: usize) -> std::ops::Range<usize> {
-    let lo = (c - ext - 1.0).floor().max(0.0);
-    let hi = (c + ext + 1.0).ceil().max(0.0);
-    (lo as usize).min(n)..(hi as usize).min(n)
+/// The pixels of `img` within `ext` pixels of `(cx, cy)`, one pixel of margin added.
+fn around(img: &RgbImage<u8>, cx: f64, cy: f64, ext: f64) -> (Range<usize>, Range<usize>) {
+    let r = ext + 1.0;
+    Circle { cx, cy, r }.pixel_bounds(img.width, img.height)
 }
 
 /// A ring of radius `r` and line width `width` (pixels) with a one-pixel coverage ramp.
@@ -84,10 +84,10 @@ pub fn draw_ring(img: &mut RgbImage<u8>, cx: f64, cy: f64, r: f64, width: f64, c
         return;
     }
     let half = 0.5 * width;
-    let ext = r + half + 1.0;
-    for y in span(cy, ext, img.height) {
+    let (xs, ys) = around(img, cx, cy, r + half + 1.0);
+    for y in ys {
         let dy = y as f64 + 0.5 - cy;
-        for x in span(cx, ext, img.width) {
+        for x in xs.clone() {
             let dx = x as f64 + 0.5 - cx;
             let d = ((dx * dx + dy * dy).sqrt() - r).abs();
             blend(img, x, y, colour, half + 0.5 - d);
@@ -97,13 +97,13 @@ pub fn draw_ring(img: &mut RgbImage<u8>, cx: f64, cy: f64, r: f64, width: f64, c
 
 /// A filled disc of radius `r` pixels with a one-pixel coverage ramp at its edge.
 pub fn draw_disc(img: &mut RgbImage<u8>, cx: f64, cy: f64, r: f64, colour: [u8; 3]) {
-    if !(cx.is_finite() && cy.is_finite() && r.is_finite() && r > 0.0) {
+    if !(Circle { cx, cy, r }).is_valid() {
         return;
     }
-    let ext = r + 1.0;
-    for y in span(cy, ext, img.height) {
+    let (xs, ys) = around(img, cx, cy, r + 1.0);
+    for y in ys {
         let dy = y as f64 + 0.5 - cy;
-        for x in span(cx, ext, img.width) {
+        for x in xs.clone() {
             let dx = x as f64 + 0.5 - cx;
             blend(img, x, y, colour, r + 0.5 - (dx * dx + dy * dy).sqrt());
         }

@@ -8,7 +8,7 @@
 //!   illuminance (θ ≤ 90°, cosine-weighted) is scaled to the reading.
 //!
 //! Luminance and illuminance are computed the way Radiance's tools compute them
-//! ([`crate::sky::radiance_luminance`]: 179 × (0.265 R + 0.670 G + 0.065 B)), so after the scale
+//! ([`crate::image::radiance_luminance`]: 179 × (0.265 R + 0.670 G + 0.065 B)), so after the scale
 //! the values are Radiance's W·sr⁻¹·m⁻² and `evalglare`, `pvalue -o` and `falsecolor` read
 //! cd/m² and lux from them directly. With both readings the luminance sets the scale (it is the
 //! more local measurement) and the disagreement of the illuminance is reported: a large one
@@ -16,8 +16,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::image::{HdrImage, PixelPoint};
-use crate::sky::radiance_luminance;
+use crate::image::{radiance_luminance, Circle, HdrImage, PixelPoint};
 
 /// A spot-meter reading: the luminance of the patch of radius `radius_px` around `pixel`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -109,13 +108,10 @@ pub fn patch_luminance(img: &HdrImage, spot: &SpotLuminance) -> Result<f64, Phot
     if !(cx.is_finite() && cy.is_finite()) {
         return Err(outside);
     }
-    let y0 = (cy - r).floor().max(0.0) as usize;
-    let y1 = ((cy + r).ceil().max(0.0) as usize).min(img.height);
-    let x0 = (cx - r).floor().max(0.0) as usize;
-    let x1 = ((cx + r).ceil().max(0.0) as usize).min(img.width);
+    let (xs, ys) = Circle { cx, cy, r }.pixel_bounds(img.width, img.height);
     let (mut sum, mut n) = (0.0, 0usize);
-    for y in y0..y1 {
-        for x in x0..x1 {
+    for y in ys {
+        for x in xs.clone() {
             let (dx, dy) = (x as f64 + 0.5 - cx, y as f64 + 0.5 - cy);
             if dx * dx + dy * dy <= r * r {
                 let p = img.pixel(x, y);

@@ -389,31 +389,6 @@ impl Default for ReprojectOptions {
     }
 }
 
-/// Bilinear sample at continuous position (centres at +0.5), edges clamped.
-#[inline]
-fn bilinear(img: &HdrImage, x: f64, y: f64) -> [f32; 3] {
-    let w = img.width;
-    let h = img.height;
-    let fx = (x - 0.5).clamp(0.0, (w - 1) as f64);
-    let fy = (y - 0.5).clamp(0.0, (h - 1) as f64);
-    let x0 = fx as usize;
-    let y0 = fy as usize;
-    let x1 = (x0 + 1).min(w - 1);
-    let y1 = (y0 + 1).min(h - 1);
-    let ax = (fx - x0 as f64) as f32;
-    let ay = (fy - y0 as f64) as f32;
-    let d = &img.data;
-    let i00 = 3 * (y0 * w + x0);
-    let i01 = 3 * (y0 * w + x1);
-    let i10 = 3 * (y1 * w + x0);
-    let i11 = 3 * (y1 * w + x1);
-    std::array::from_fn(|c| {
-        let top = d[i00 + c] + (d[i01 + c] - d[i00 + c]) * ax;
-        let bot = d[i10 + c] + (d[i11 + c] - d[i10 + c]) * ax;
-        top + (bot - top) * ay
-    })
-}
-
 struct Sampler<'a> {
     src: &'a HdrImage,
     geom: &'a SkyGeometry,
@@ -438,7 +413,7 @@ impl Sampler<'_> {
     fn sample(&self, v: Option<[f64; 3]>) -> [f32; 3] {
         let Some(v) = v else { return [0.0; 3] };
         match self.source_pos(v) {
-            Ok(Some((x, y))) => bilinear(self.src, x, y),
+            Ok(Some((x, y))) => self.src.bilinear(x, y),
             Ok(None) => [0.0; 3],
             Err(c) => c,
         }
@@ -542,7 +517,7 @@ fn render_row(
         let n = (k.ceil() as usize).clamp(1, max_ss);
         let px = if n == 1 {
             match centre {
-                Tap::Src(sx, sy) => bilinear(sampler.src, sx, sy),
+                Tap::Src(sx, sy) => sampler.src.bilinear(sx, sy),
                 Tap::Const(c) => c,
                 Tap::Outside => [0.0; 3],
             }
@@ -638,10 +613,15 @@ pub fn horizontal_irradiance_fisheye(img: &HdrImage, geom: &SkyGeometry) -> [f64
     let r90 = proj.radius(std::f64::consts::FRAC_PI_2);
     let table = HorizontalWeight::new(&proj).table();
     let weight = |dx: f64, dy: f64| table.at((dx * dx + dy * dy).sqrt());
-    let y0 = (cy - r90 - 1.0).floor().max(0.0) as usize;
-    let y1 = ((cy + r90 + 1.0).ceil().max(0.0) as usize).min(img.height);
-    let x0 = (cx - r90 - 1.0).floor().max(0.0) as usize;
-    let x1 = ((cx + r90 + 1.0).ceil().max(0.0) as usize).min(img.width);
+    // One pixel beyond the horizon: the pixels it cuts are split.
+    let around = Circle {
+        cx,
+        cy,
+        r: r90 + 1.0,
+    };
+    let (xs, ys) = around.pixel_bounds(img.width, img.height);
+    let (x0, x1) = (xs.start, xs.end);
+    let (y0, y1) = (ys.start, ys.end);
     let row_sum = |y: usize| -> [f64; 3] {
         let mut acc = [0.0f64; 3];
         let dy = y as f64 + 0.5 - cy;

@@ -1,4 +1,4 @@
-//! Camera response calibration (Debevec & Malik 1997) and camera profiles.
+//! Camera response calibration (Debevec & Malik 1997).
 //!
 //! A pixel value `Z` is a fixed, monotonic function of the sensor exposure `E · Δt`; Debevec &
 //! Malik recover its log inverse `g(Z) = ln E + ln Δt` (natural log, one curve per colour
@@ -40,8 +40,8 @@
 //! value by linear interpolation of `g` at `v / 257` ([`Response::g16`]).
 //!
 //! ## Camera profiles
-//! [`CameraProfile`] stores a response as JSON (see its docs for the fields); readers check the
-//! `version`, lengths, finiteness and monotonicity.
+//! [`crate::camera::CameraProfile`] stores a response (with a noise model) as JSON; readers
+//! check the `version`, lengths, finiteness and monotonicity ([`Response::from_curves`]).
 //!
 //! References: P. Debevec, J. Malik, *Recovering High Dynamic Range Radiance Maps from
 //! Photographs*, SIGGRAPH 1997; Å. Björck, *Stability analysis of the method of seminormal
@@ -55,9 +55,9 @@ use crate::sampling::{sample, SampleOptions, SampleReport, Samples, SamplingErro
 pub const LEVELS: usize = 256;
 /// The code whose `g` is fixed to zero.
 pub const GAUGE: usize = 128;
-// The camera-profile JSON format lives with the other formats; re-exported here, where the
-// response it stores is defined.
-pub use crate::formats::camera_profile::{CameraProfile, PROFILE_VERSION};
+/// The camera-profile format version ([`crate::camera::CameraProfile`]), defined here because
+/// [`ResponseError::Version`] names it.
+pub const PROFILE_VERSION: u32 = 1;
 /// [`stability`] calls a calibration unstable when the RMS (over `z = 10..=245` and the three
 /// channels) of the standard deviation of `g(z)` across runs exceeds this many natural-log
 /// units (0.05 ≈ 5 % in radiance ≈ 0.07 stops): well above the spread of a good 8-bit bracket
@@ -119,29 +119,6 @@ pub enum ResponseError {
         found: u32,
     },
 }
-
-/// How frames are weighted when merging (see [`crate::merge`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Weighting {
-    /// Every frame counts equally: the seed's eq. 4, an unweighted mean of `g(Z) − ln Δt`.
-    /// Clipped values pull the mean down ("dark suns"); kept for reproducing the seed.
-    None,
-    /// Debevec's hat, zero at 0 and 255, with full weight for the shortest frame above
-    /// mid-grey and for the longest below it (the default).
-    #[default]
-    Hat,
-    /// Inverse variance of each vote under a camera noise model (shot, read, quantisation and
-    /// JPEG noise; see [`crate::noise`]), evaluated at the code the frame is *expected* to read
-    /// given the hat's first estimate (two passes, as Granados et al. 2010): a longer exposure,
-    /// which collected more light, counts for more. Zero at the black level and 255, fading to
-    /// zero over the top codes; a frame expected within 5 codes of clipping gets no weight. On
-    /// phone-like brackets about 30 % less error than the hat on the sky, at about 5× the hat's
-    /// merge time (6 MP: 133 ms against 23 ms on 2 cores, the noise model given).
-    Noise,
-}
-
-crate::named_enum!(Weighting, "weighting", [None => "none", Hat => "hat", Noise => "noise"]);
 
 /// Debevec's hat weight of an 8-bit code: `z` up to 127, `255 − z` above; zero at 0 and 255.
 #[inline]
@@ -326,24 +303,6 @@ impl Calibration {
             }
         }
         (xs, ys)
-    }
-
-    /// A profile for this calibration (camera fields empty; the CLI fills them).
-    pub fn to_profile(&self) -> CameraProfile {
-        CameraProfile {
-            version: PROFILE_VERSION,
-            linear: false,
-            g: self.response.g.clone(),
-            lambda: self.lambda,
-            weighting: Weighting::Hat,
-            samples: self.samples.report.used,
-            seed: self.samples.report.seed,
-            make: None,
-            model: None,
-            iso: None,
-            date: None,
-            noise: None,
-        }
     }
 }
 

@@ -437,6 +437,8 @@ pub fn sample(
 /// survive them.
 pub const MAX_RELAXATIONS: u32 = 2;
 
+/// One sampling pass with the thresholds in `opts`: the area, each grid cell's quota, draws
+/// until the quotas are met, a top-up when candidates were rejected, and the code bands.
 fn sample_once(
     frames: &[Frame],
     circle: Option<Circle>,
@@ -444,137 +446,40 @@ fn sample_once(
 ) -> Result<Samples, SamplingError> {
     let (w, h) = check_frames(frames)?;
     let p = frames.len();
-
-    // The usable area's bounding square, clipped to the frame.
-    let (x0, y0, x1, y1) = match circle {
-        Some(c) => {
-            if !(c.cx.is_finite() && c.cy.is_finite() && c.r.is_finite() && c.r > 0.0) {
-                return Err(SamplingError::BadOption(format!(
-                    "circle centre {},{} radius {} is not a finite positive circle",
-                    c.cx, c.cy, c.r
-                )));
-            }
-            let x0 = (c.cx - c.r).floor().max(0.0);
-            let y0 = (c.cy - c.r).floor().max(0.0);
-            let x1 = (c.cx + c.r).ceil().min(w as f64);
-            let y1 = (c.cy + c.r).ceil().min(h as f64);
-            if x1 <= x0 || y1 <= y0 {
-                return Err(SamplingError::EmptyArea {
-                    cx: c.cx,
-                    cy: c.cy,
-                    r: c.r,
-                    width: w,
-                    height: h,
-                });
-            }
-            (x0 as usize, y0 as usize, x1 as usize, y1 as usize)
-        }
-        None => (0, 0, w, h),
-    };
-    let g = opts.grid;
-    let (aw, ah) = (x1 - x0, y1 - y0);
-    // Cell k spans [x0 + k·aw/G, x0 + (k+1)·aw/G); cells may be empty when the area is
-    // narrower than G pixels.
-    let cell_bounds = |cx: usize, cy: usize| {
-        (
-            x0 + cx * aw / g,
-            x0 + (cx + 1) * aw / g,
-            y0 + cy * ah / g,
-            y0 + (cy + 1) * ah / g,
-        )
-    };
-
-    let requested = opts.samples;
-    let target = if opts.auto_raise && p >= 2 {
-        requested.max(255usize.div_ceil(p - 1))
-    } else {
-        requested
-    };
-
+    let area = usable_area(circle, w, h)?;
+    let target = target_count(opts, p);
     let mut rng = SplitMix64::new(opts.seed);
-    let cells = g * g;
-    let mut quota = vec![target / cells; cells];
-    // The remainder goes to distinct random cells: a partial Fisher–Yates shuffle.
-    let rem = target % cells;
-    let mut order: Vec<usize> = (0..cells).collect();
-    for i in 0..rem {
-        let j = i + rng.below(cells - i);
-        order.swap(i, j);
-        quota[order[i]] += 1;
-    }
-
-    let mut report = SampleReport {
-        requested,
+    let quota = cell_quotas(opts.grid, target, &mut rng);
+    let report = SampleReport {
+        requested: opts.samples,
         target,
-        grid: g,
+        grid: opts.grid,
         seed: opts.seed,
         frames: p,
         ..SampleReport::default()
     };
-    let mut positions = Vec::with_capacity(target);
-    let mut values = Vec::with_capacity(target * p);
-    let mut taken = std::collections::HashSet::new();
-    let mut scratch = vec![[0f32; 3]; p];
-
-    let mut try_cell = |cell: usize,
-                        rng: &mut SplitMix64,
-                        report: &mut SampleReport,
-                        positions: &mut Vec<(usize, usize)>,
-                        values: &mut Vec<[f32; 3]>|
-     -> bool {
-        let (cx0, cx1, cy0, cy1) = cell_bounds(cell % g, cell / g);
-        if cx1 <= cx0 || cy1 <= cy0 {
-            return false;
-        }
-        let x = cx0 + rng.below(cx1 - cx0);
-        let y = cy0 + rng.below(cy1 - cy0);
-        if let Some(c) = circle {
-            if !c.contains_pixel(x, y) {
-                report.outside_circle += 1;
-                return false;
-            }
-        }
-        if opts.reject && !taken.insert((x, y)) {
-            return false;
-        }
-        for (s, f) in scratch.iter_mut().zip(frames) {
-            *s = patch_mean(&f.pixels, x, y, w, h, opts.patch);
-        }
-        if opts.reject {
-            if let Some(reason) = reject_reason(frames, &scratch, x, y, w, h, opts) {
-                match reason {
-                    Reject::Clipped => report.rejected_clipped += 1,
-                    Reject::Edge => report.rejected_edge += 1,
-                    Reject::NonMonotonic => report.rejected_non_monotonic += 1,
-                }
-                return false;
-            }
-        }
-        positions.push((x, y));
-        values.extend_from_slice(&scratch);
-        true
+    let mut draw = Draws {
+        frames,
+        circle,
+        opts,
+        size: (w, h),
+        area,
+        report,
+        positions: Vec::with_capacity(target),
+        values: Vec::with_capacity(target * p),
+        taken: std::collections::HashSet::new(),
+        scratch: vec![[0f32; 3]; p],
     };
-
-    let mut got = vec![0usize; cells];
-    for cell in 0..cells {
-        let mut attempts = 0;
-        while got[cell] < quota[cell] && attempts < quota[cell] * ATTEMPTS_PER_SAMPLE {
-            attempts += 1;
-            if try_cell(cell, &mut rng, &mut report, &mut positions, &mut values) {
-                got[cell] += 1;
-            }
-        }
-    }
+    draw.meet_quotas(&quota, &mut rng);
     if opts.reject {
-        // Top up from all cells in turn; bounded so a featureless or clipped frame ends.
-        let mut budget = target * ATTEMPTS_PER_SAMPLE;
-        let mut cell = 0;
-        while positions.len() < target && budget > 0 {
-            budget -= 1;
-            try_cell(cell, &mut rng, &mut report, &mut positions, &mut values);
-            cell = (cell + 1) % cells;
-        }
+        draw.top_up(target, &mut rng);
     }
+    let Draws {
+        mut report,
+        mut positions,
+        mut values,
+        ..
+    } = draw;
     if opts.code_bands > 0 {
         report.band_samples = fill_bands(
             frames,
@@ -595,6 +500,180 @@ fn sample_once(
         frames: p,
         report,
     })
+}
+
+/// The usable area's bounding square `(x0, y0, x1, y1)`, clipped to the `w × h` frame: the
+/// circle's when given, else the whole frame.
+fn usable_area(
+    circle: Option<Circle>,
+    w: usize,
+    h: usize,
+) -> Result<(usize, usize, usize, usize), SamplingError> {
+    let Some(c) = circle else {
+        return Ok((0, 0, w, h));
+    };
+    if !c.is_valid() {
+        return Err(SamplingError::BadOption(format!(
+            "circle centre {},{} radius {} is not a finite positive circle",
+            c.cx, c.cy, c.r
+        )));
+    }
+    let (xs, ys) = c.pixel_bounds(w, h);
+    if xs.is_empty() || ys.is_empty() {
+        return Err(SamplingError::EmptyArea {
+            cx: c.cx,
+            cy: c.cy,
+            r: c.r,
+            width: w,
+            height: h,
+        });
+    }
+    Ok((xs.start, ys.start, xs.end, ys.end))
+}
+
+/// The number of samples aimed at: the request, raised so that `N · (P − 1) ≥ 255` when asked.
+fn target_count(opts: &SampleOptions, frames: usize) -> usize {
+    if opts.auto_raise && frames >= 2 {
+        opts.samples.max(255usize.div_ceil(frames - 1))
+    } else {
+        opts.samples
+    }
+}
+
+/// Each of the `grid²` cells' share of `target`; the remainder goes to distinct random cells
+/// (a partial Fisher–Yates shuffle).
+fn cell_quotas(grid: usize, target: usize, rng: &mut SplitMix64) -> Vec<usize> {
+    let cells = grid * grid;
+    let mut quota = vec![target / cells; cells];
+    let rem = target % cells;
+    let mut order: Vec<usize> = (0..cells).collect();
+    for i in 0..rem {
+        let j = i + rng.below(cells - i);
+        order.swap(i, j);
+        quota[order[i]] += 1;
+    }
+    quota
+}
+
+/// Why a candidate position was turned down.
+enum Refusal {
+    /// Outside the image circle (not a judgement of the content).
+    Outside,
+    /// Already taken.
+    Taken,
+    /// Failed a content test.
+    Rejected(Reject),
+}
+
+/// The draws of one sampling pass: what has been taken so far, and the report.
+struct Draws<'a> {
+    frames: &'a [Frame],
+    circle: Option<Circle>,
+    opts: &'a SampleOptions,
+    size: (usize, usize),
+    /// `(x0, y0, x1, y1)` of [`usable_area`].
+    area: (usize, usize, usize, usize),
+    report: SampleReport,
+    positions: Vec<(usize, usize)>,
+    values: Vec<[f32; 3]>,
+    taken: std::collections::HashSet<(usize, usize)>,
+    /// The candidate's patch means, one per frame.
+    scratch: Vec<[f32; 3]>,
+}
+
+impl Draws<'_> {
+    /// Draws in every cell until its quota is met or its attempts run out.
+    fn meet_quotas(&mut self, quota: &[usize], rng: &mut SplitMix64) {
+        let mut got = vec![0usize; quota.len()];
+        for cell in 0..quota.len() {
+            let mut attempts = 0;
+            while got[cell] < quota[cell] && attempts < quota[cell] * ATTEMPTS_PER_SAMPLE {
+                attempts += 1;
+                if self.try_cell(cell, rng) {
+                    got[cell] += 1;
+                }
+            }
+        }
+    }
+
+    /// Tops up to `target` from all cells in turn; bounded so a featureless or clipped frame
+    /// ends.
+    fn top_up(&mut self, target: usize, rng: &mut SplitMix64) {
+        let cells = self.opts.grid * self.opts.grid;
+        let mut budget = target * ATTEMPTS_PER_SAMPLE;
+        let mut cell = 0;
+        while self.positions.len() < target && budget > 0 {
+            budget -= 1;
+            self.try_cell(cell, rng);
+            cell = (cell + 1) % cells;
+        }
+    }
+
+    /// Cell `k`'s pixel span `(x0, x1, y0, y1)`: `[x0 + k·aw/G, x0 + (k+1)·aw/G)` across,
+    /// likewise down; empty when the area is narrower than `G` pixels.
+    fn cell_bounds(&self, cell: usize) -> (usize, usize, usize, usize) {
+        let g = self.opts.grid;
+        let (cx, cy) = (cell % g, cell / g);
+        let (x0, y0, x1, y1) = self.area;
+        let (aw, ah) = (x1 - x0, y1 - y0);
+        (
+            x0 + cx * aw / g,
+            x0 + (cx + 1) * aw / g,
+            y0 + cy * ah / g,
+            y0 + (cy + 1) * ah / g,
+        )
+    }
+
+    /// Draws one position in `cell` and keeps it when it passes; true when kept.
+    fn try_cell(&mut self, cell: usize, rng: &mut SplitMix64) -> bool {
+        let (cx0, cx1, cy0, cy1) = self.cell_bounds(cell);
+        if cx1 <= cx0 || cy1 <= cy0 {
+            return false;
+        }
+        let x = cx0 + rng.below(cx1 - cx0);
+        let y = cy0 + rng.below(cy1 - cy0);
+        match self.judge(x, y) {
+            Ok(()) => {
+                self.positions.push((x, y));
+                self.values.extend_from_slice(&self.scratch);
+                true
+            }
+            Err(refusal) => {
+                let r = &mut self.report;
+                match refusal {
+                    Refusal::Outside => r.outside_circle += 1,
+                    Refusal::Taken => {}
+                    Refusal::Rejected(Reject::Clipped) => r.rejected_clipped += 1,
+                    Refusal::Rejected(Reject::Edge) => r.rejected_edge += 1,
+                    Refusal::Rejected(Reject::NonMonotonic) => r.rejected_non_monotonic += 1,
+                }
+                false
+            }
+        }
+    }
+
+    /// Reads the patch means at `(x, y)` into the scratch values and judges the position.
+    fn judge(&mut self, x: usize, y: usize) -> Result<(), Refusal> {
+        let (w, h) = self.size;
+        let opts = self.opts;
+        if let Some(c) = self.circle {
+            if !c.contains_pixel(x, y) {
+                return Err(Refusal::Outside);
+            }
+        }
+        if opts.reject && !self.taken.insert((x, y)) {
+            return Err(Refusal::Taken);
+        }
+        for (s, f) in self.scratch.iter_mut().zip(self.frames) {
+            *s = patch_mean(&f.pixels, x, y, w, h, opts.patch);
+        }
+        if opts.reject {
+            if let Some(reason) = reject_reason(self.frames, &self.scratch, x, y, w, h, opts) {
+                return Err(Refusal::Rejected(reason));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Per channel, the lowest and highest code (rounded) with a non-zero weight among `values`;

@@ -28,10 +28,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::image::{HdrImage, PixelPoint};
+use crate::image::{radiance_luminance, Circle, HdrImage, PixelPoint, RADIANCE_EFFICACY};
 use crate::merge::CLIPPED_HIGH;
 use crate::reproject::HorizontalWeight;
-use crate::sky::{radiance_luminance, Direction, SkyGeometry, RADIANCE_EFFICACY};
+use crate::sky::{Direction, SkyGeometry};
 
 /// Angular radius of the solar disc, degrees (mean Earth–Sun distance).
 pub const SUN_HALF_ANGLE_DEG: f64 = 0.2665;
@@ -144,14 +144,16 @@ pub fn disc_pixels(
     let k = ((16.0 / extent).ceil() as usize).clamp(8, 64);
     let sun_v = sun.to_vector();
     let cos_a = alpha.cos();
-    let x0 = (c.x - reach).floor().max(0.0) as usize;
-    let y0 = (c.y - reach).floor().max(0.0) as usize;
-    let x1 = ((c.x + reach).ceil().max(0.0) as usize).min(width);
-    let y1 = ((c.y + reach).ceil().max(0.0) as usize).min(height);
+    let around = Circle {
+        cx: c.x,
+        cy: c.y,
+        r: reach,
+    };
+    let (xs, ys) = around.pixel_bounds(width, height);
     let hw = HorizontalWeight::new(&proj);
     let mut out = Vec::new();
-    for y in y0..y1 {
-        for x in x0..x1 {
+    for y in ys {
+        for x in xs.clone() {
             let mut inside = 0usize;
             for j in 0..k {
                 for i in 0..k {
@@ -202,12 +204,14 @@ pub fn clipped_near(
         return false;
     }
     let r = radius_px.max(0.5);
-    let y0 = (centre.y - r).floor().max(0.0) as usize;
-    let y1 = ((centre.y + r).ceil().max(0.0) as usize).min(height);
-    let x0 = (centre.x - r).floor().max(0.0) as usize;
-    let x1 = ((centre.x + r).ceil().max(0.0) as usize).min(width);
-    (y0..y1).any(|y| {
-        (x0..x1).any(|x| {
+    let around = Circle {
+        cx: centre.x,
+        cy: centre.y,
+        r,
+    };
+    let (xs, ys) = around.pixel_bounds(width, height);
+    ys.into_iter().any(|y| {
+        xs.clone().any(|x| {
             let (dx, dy) = (x as f64 + 0.5 - centre.x, y as f64 + 0.5 - centre.y);
             dx * dx + dy * dy <= r * r && mask[y * width + x] & CLIPPED_HIGH != 0
         })

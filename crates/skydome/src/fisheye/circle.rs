@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::FisheyeError;
-use crate::image::{Circle, RgbImage};
+use crate::image::{Bilinear, Circle, RgbImage};
 
 /// A fitted image circle.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -211,23 +211,11 @@ fn housing_threshold(img: &Blurred) -> (f32, f32) {
     (housing, t)
 }
 
+/// The blurred image bilinearly sampled at `(x, y)` (continuous pixel coordinates).
 #[inline]
 fn bilinear1(img: &Blurred, x: f64, y: f64) -> f32 {
-    let (w, h) = (img.w, img.h);
-    let at = |i: usize| Blurred::value(img.sums[i]);
-    // (x, y) in continuous pixel coordinates; centres at +0.5.
-    let fx = (x - 0.5).clamp(0.0, (w - 1) as f64);
-    let fy = (y - 0.5).clamp(0.0, (h - 1) as f64);
-    // Non-negative, so truncation is the floor (without a libm call).
-    let x0 = fx as usize;
-    let y0 = fy as usize;
-    let x1 = (x0 + 1).min(w - 1);
-    let y1 = (y0 + 1).min(h - 1);
-    let ax = (fx - x0 as f64) as f32;
-    let ay = (fy - y0 as f64) as f32;
-    let top = at(y0 * w + x0) * (1.0 - ax) + at(y0 * w + x1) * ax;
-    let bot = at(y1 * w + x0) * (1.0 - ax) + at(y1 * w + x1) * ax;
-    top * (1.0 - ay) + bot * ay
+    let b = Bilinear::at(img.w, img.h, x, y);
+    b.weighted_sum(b.idx.map(|i| Blurred::value(img.sums[i])))
 }
 
 /// Edge points on rays walked inwards from the frame edge towards `centre`.

@@ -11,8 +11,8 @@
 
 use crate::bracket::{bin16, DecodedFrame, Pixels};
 use crate::fisheye::{FisheyeError, LensProfile};
+use crate::image::radiance_luminance;
 use crate::response::Response;
-use crate::sky::radiance_luminance;
 
 /// Width of the rings, degrees.
 pub const RING_DEG: f64 = 2.0;

@@ -1,6 +1,7 @@
 //! Fish-eye lens geometry, one concept per module: radial projections `r(θ)` (`projection`),
 //! lens fitting from measurements (`fit`), the visible image circle (`circle`) and the crop
-//! to the 180° sky-dome (`crop`). Lens profiles (JSON) are in [`crate::formats::lens_profile`].
+//! to the 180° sky-dome (`crop`), the lens profile with its vignetting (`profile`, stored as
+//! JSON) and the fall-off measured on flat fields (`flat_field`).
 //!
 //! # Conventions
 //! - Pixels: origin top-left, `x` right, `y` down, pixel `(x, y)` centred at `(x + 0.5, y + 0.5)`
@@ -57,6 +58,7 @@ mod circle;
 mod crop;
 mod fit;
 mod flat_field;
+mod profile;
 mod projection;
 
 pub(crate) use circle::detect_circle_rgb8;
@@ -64,10 +66,8 @@ pub use circle::{detect_circle, detect_circle_luma, CircleFit};
 pub use crop::{crop_dome, DomeCrop};
 pub use fit::{fit_projection, parse_angle_radius_csv, AngleRadius, LensFit, ModelFit};
 pub use flat_field::{flat_field_falloff, RING_DEG};
+pub use profile::{devignette, LensProfile, Vignetting, LENS_PROFILE_VERSION};
 pub use projection::{LensKind, Projection};
-// The lens-profile JSON format lives with the other formats; re-exported here, where users
-// of the lens model look for it.
-pub use crate::formats::lens_profile::{devignette, LensProfile, Vignetting, LENS_PROFILE_VERSION};
 
 /// Errors from lens fitting, lens profiles, circle detection and cropping.
 #[derive(Debug, thiserror::Error)]

@@ -53,6 +53,9 @@
 //! dropped. [`ExrFile::data_window`] tells where real data was. Both windows count against
 //! [`Limits::max_pixels`] before any pixel is decoded.
 //!
+//! Header attributes are written in name order (as OpenEXR's own library writes them), so the
+//! same image and metadata always give the same bytes.
+//!
 //! References: OpenEXR file layout and standard attributes,
 //! <https://openexr.com/en/latest/OpenEXRFileLayout.html>,
 //! <https://openexr.com/en/latest/StandardAttributes.html>.
@@ -374,7 +377,56 @@ pub fn encode_exr(
             Image::from_layer(layer).write().to_buffered(&mut out)?;
         }
     }
-    Ok(out.into_inner())
+    let mut bytes = out.into_inner();
+    sort_header_attributes(&mut bytes).map_err(ExrError::Exr)?;
+    Ok(bytes)
+}
+
+/// Puts the attributes of a single-part file's header in name order, in place.
+///
+/// The `exr` crate keeps non-standard attributes (ours: `skydome:…`) in a `HashMap` with a
+/// random seed and writes them in its iteration order, so two runs would write the same
+/// attributes in different orders. OpenEXR's own library writes every header in name order
+/// (its `Header` is a `std::map`); doing the same here makes the bytes reproducible. The
+/// header keeps its length, so the offset table after it stays valid.
+fn sort_header_attributes(bytes: &mut [u8]) -> Result<(), String> {
+    const START: usize = 8; // magic number and version field
+    let bad = || "internal: cannot parse the header just written".to_string();
+    let flags = bytes.get(4..8).ok_or_else(bad)?;
+    if flags[1] & 0x10 != 0 {
+        return Err("internal: multi-part header written".into());
+    }
+    let cstr_end = |from: usize| -> Result<usize, String> {
+        let rel = bytes
+            .get(from..)
+            .and_then(|b| b.iter().position(|&c| c == 0))
+            .ok_or_else(bad)?;
+        Ok(from + rel + 1)
+    };
+    // Each record: name\0 type\0 size (i32 LE) value; a lone \0 ends the header.
+    let mut records: Vec<(usize, usize, usize)> = Vec::new(); // (start, name end, record end)
+    let mut at = START;
+    while *bytes.get(at).ok_or_else(bad)? != 0 {
+        let name_end = cstr_end(at)?;
+        let type_end = cstr_end(name_end)?;
+        let size = bytes.get(type_end..type_end + 4).ok_or_else(bad)?;
+        let size = i32::from_le_bytes([size[0], size[1], size[2], size[3]]);
+        let size = usize::try_from(size).map_err(|_| bad())?;
+        let end = type_end + 4 + size;
+        if end > bytes.len() {
+            return Err(bad());
+        }
+        records.push((at, name_end, end));
+        at = end;
+    }
+    let mut sorted = records.clone();
+    sorted.sort_by(|a, b| bytes[a.0..a.1].cmp(&bytes[b.0..b.1]));
+    let header: Vec<u8> = sorted
+        .iter()
+        .flat_map(|&(s, _, e)| bytes[s..e].iter().copied())
+        .collect();
+    bytes[START..START + header.len()].copy_from_slice(&header);
+    Ok(())
 }
 
 /// Writes `image` with `meta` as OpenEXR to `w` (see [`encode_exr`]); nothing is written

@@ -4,14 +4,14 @@
 //! - [`rgbe`]: Radiance RGBE `.hdr` (reader: flat, old-style and new-style RLE, `#?RADIANCE`
 //!   and `#?RGBE`; writer: new-style RLE with skydome's header lines).
 //! - [`exr`]: OpenEXR RGB half/float with the same metadata as string attributes.
-//! - [`camera_profile`], [`lens_profile`]: the JSON profiles of a camera and a lens.
+//! - The JSON of a camera profile and a lens profile is read and written by the profiles'
+//!   own `to_json`/`from_json` ([`crate::camera::CameraProfile`],
+//!   [`crate::fisheye::LensProfile`]).
 //! - [`picture`]: 8-bit JPEG/PNG and 16-bit PNG display pictures (previews, overlays, maps).
 
 use crate::image::HdrImage;
 
-pub mod camera_profile;
 pub mod exr;
-pub mod lens_profile;
 pub mod picture;
 pub mod rgbe;
 

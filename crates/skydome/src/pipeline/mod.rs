@@ -22,25 +22,39 @@
 //!
 //! See the crate documentation for a complete example.
 
+mod options;
+mod progress;
+mod report;
 mod sky_stage;
 
 use std::ops::ControlFlow;
 
-use serde::{Deserialize, Serialize};
-
-use crate::bracket::{self, Bracket, BracketError, DecodeOptions, DecodedFrame, OrientationPolicy};
-use crate::fisheye::{self, CircleFit, FisheyeError, LensKind, LensProfile};
-use crate::formats::picture::PictureError;
-use crate::formats::{HdrMeta, PixelPoint};
-use crate::image::{Circle, HdrImage, RgbImage};
-use crate::merge::{self, MergeError, MergeOptions};
-use crate::reproject::{Ground, ReprojectError};
-use crate::response::{self, CalibrateOptions, CameraProfile, ResponseError, Weighting};
+use crate::align::{self, AlignOptions, Alignment};
+use crate::bracket::{self, Bracket, BracketError, DecodeOptions, DecodedFrame};
+use crate::camera::CameraProfile;
+use crate::fisheye::{self, CircleFit, FisheyeError, LensProfile};
+use crate::formats::picture::{grey_picture, PictureError};
+use crate::formats::{HdrMeta, ABSOLUTE_UNITS_LINE};
+use crate::image::{fmt_num, Circle, HdrImage, RgbImage};
+use crate::merge::{self, MergeError, MergeOptions, Merged};
+use crate::overlay::{self, OverlayMarks};
+use crate::photometry::{PhotometryError, PhotometryReport};
+use crate::reproject::ReprojectError;
+use crate::response::{self, Response, ResponseError};
 use crate::sampling::SampleReport;
-use crate::sky::{DevicePose, SkyError};
+use crate::sky::SkyError;
+use crate::sun_disc::DirectSource;
 use crate::tonemap::{self, ToneMap, TonemapError};
 
+pub use options::{
+    default_equirect_width, EncodedFrame, EquirectOptions, Frames, Input, LensSource, Options,
+    Products, ResponseSource, SkyOptions, SunDisc, SunMode,
+};
+use progress::Reporter;
+pub use progress::{no_progress, Progress, Stage};
+pub use report::{Dome, FrameSummary, Report};
 pub use sky_stage::{GeometryReport, NorthFromSun, SunSource};
+use sky_stage::{SkyOutcome, SkyResult};
 
 /// Errors of [`run`]: the stage's own error, or cancellation.
 #[derive(Debug, thiserror::Error)]
@@ -87,7 +101,7 @@ pub enum PipelineError {
     Reproject(#[from] ReprojectError),
     /// The absolute calibration failed.
     #[error("{0}")]
-    Photometry(#[from] crate::photometry::PhotometryError),
+    Photometry(#[from] PhotometryError),
     /// Tone mapping a picture failed.
     #[error("{0}")]
     Tonemap(#[from] TonemapError),
@@ -99,362 +113,6 @@ pub enum PipelineError {
     Cancelled,
 }
 
-/// One encoded photo (JPEG, PNG or TIFF bytes) and the name used in messages (a file name).
-#[derive(Debug, Clone)]
-pub struct EncodedFrame {
-    /// Name for messages, usually the file name.
-    pub name: String,
-    /// The file's bytes.
-    pub bytes: Vec<u8>,
-}
-
-/// The frames of a bracket, encoded or already decoded.
-#[derive(Debug, Clone)]
-pub enum Frames {
-    /// Encoded photos, decoded by [`run`] (in parallel with the `parallel` feature).
-    Encoded(Vec<EncodedFrame>),
-    /// Frames decoded by [`bracket::decode`].
-    Decoded(Vec<DecodedFrame>),
-}
-
-/// What [`run`] reads.
-#[derive(Debug, Clone)]
-pub struct Input {
-    /// The photos, in any order (they are sorted by exposure).
-    pub frames: Frames,
-    /// Exposure times in seconds, one per frame in the order given; overrides EXIF.
-    pub times: Option<Vec<f64>>,
-    /// Whether EXIF orientation is applied to the pixels.
-    pub orientation: OrientationPolicy,
-    /// Decoding limits.
-    pub decode: DecodeOptions,
-}
-
-impl Input {
-    /// Frames with exposure from EXIF, orientation applied, default limits.
-    pub fn new(frames: Frames) -> Self {
-        Self {
-            frames,
-            times: None,
-            orientation: OrientationPolicy::Apply,
-            decode: DecodeOptions::default(),
-        }
-    }
-}
-
-/// Where the camera response comes from.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ResponseSource {
-    /// A stored camera profile.
-    Profile(CameraProfile),
-    /// Calibrate on this bracket.
-    Calibrate(CalibrateOptions),
-}
-
-impl Default for ResponseSource {
-    fn default() -> Self {
-        Self::Calibrate(CalibrateOptions::default())
-    }
-}
-
-/// Where the lens model comes from.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum LensSource {
-    /// Not a fish-eye job: no circle, no sky geometry.
-    #[default]
-    None,
-    /// A stored lens profile.
-    Profile(LensProfile),
-    /// The nominal model: the image circle (given, or detected on the best-exposed frame),
-    /// a projection and the full field of view across the circle in degrees.
-    Detect {
-        /// Projection model.
-        model: LensKind,
-        /// Full field of view across the visible circle, degrees.
-        fov_deg: f64,
-        /// The circle when known; detected when `None`.
-        circle: Option<Circle>,
-    },
-}
-
-/// How the sun is found.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SunMode {
-    /// Detect the brightest compact blob inside the horizon.
-    #[default]
-    Auto,
-    /// No sun.
-    None,
-    /// Compute it from the capture time and place (NREL SPA).
-    Ephemeris,
-    /// A tapped point in the input photos' pixels (origin top-left, before any crop).
-    Tap(PixelPoint),
-}
-
-/// The sky part of the job; used only when there is a lens.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct SkyOptions {
-    /// Crop to a square around the dome of `fov_out_deg`.
-    pub crop: bool,
-    /// Field of view kept by the crop, degrees (180 = the horizon).
-    pub fov_out_deg: f64,
-    /// Compass azimuth of the phone's top edge, degrees from true north towards east. `None`:
-    /// unknown (north is not marked and azimuths are not reported).
-    pub north_deg: Option<f64>,
-    /// Set north from the sun (observed: detected or tapped) and the ephemeris instead of the
-    /// compass; `north_deg`, when given, is then only reported against. Needs time and place.
-    pub north_from_sun: bool,
-    /// How the phone lay.
-    pub pose: DevicePose,
-    /// The phone's tilt, when it was not level (from its accelerometer, or a measured tilt):
-    /// the crop is then resampled so that the zenith is at its centre (north at the top), and
-    /// every map is levelled.
-    pub level: Option<crate::sky::Level>,
-    /// How the sun is found.
-    pub sun: SunMode,
-    /// Capture time, ISO 8601 with a UTC offset; default: EXIF `DateTimeOriginal` + offset.
-    pub time: Option<String>,
-    /// Latitude in degrees, north positive; default: EXIF GPS.
-    pub latitude_deg: Option<f64>,
-    /// Longitude in degrees, east positive; default: EXIF GPS.
-    pub longitude_deg: Option<f64>,
-    /// What to do with a sun that clipped even in the shortest exposure (see
-    /// [`crate::sun_disc`]).
-    pub sun_disc: SunDisc,
-}
-
-/// What to do with a sun that clipped even in the shortest exposure.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SunDisc {
-    /// Replace the clipped disc by the solar disc whose luminance makes the direct part right
-    /// (from the illuminance reading, else the clear-sky model), and say so in the header.
-    #[default]
-    Reconstruct,
-    /// Keep the clipped values (a lower bound).
-    Keep,
-}
-
-crate::named_enum!(SunDisc, "sun disc", [Reconstruct => "reconstruct", Keep => "keep"]);
-
-impl Default for SkyOptions {
-    fn default() -> Self {
-        Self {
-            crop: false,
-            fov_out_deg: 180.0,
-            north_deg: None,
-            north_from_sun: false,
-            pose: DevicePose::ScreenDown,
-            level: None,
-            sun: SunMode::Auto,
-            time: None,
-            latitude_deg: None,
-            longitude_deg: None,
-            sun_disc: SunDisc::Reconstruct,
-        }
-    }
-}
-
-/// The equirectangular (lat-long) map: east at the centre, north at a quarter of the width.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct EquirectOptions {
-    /// Width in pixels (even); default [`default_equirect_width`] of the horizon radius.
-    pub width: Option<usize>,
-    /// What fills the lower hemisphere.
-    pub ground: Ground,
-}
-
-/// The default width of the equirectangular map for a horizon of radius `horizon_r` pixels:
-/// about 4 r (the horizon's circumference over π keeps the zenith's resolution), even,
-/// within 64..=8192.
-pub fn default_equirect_width(horizon_r: f64) -> usize {
-    ((4.0 * horizon_r).round() as usize).clamp(64, 8192) & !1
-}
-
-/// Which products [`run`] makes besides the radiance map.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct Products {
-    /// The tone-mapped 8-bit preview (default operator and automatic exposure).
-    pub preview: bool,
-    /// The preview with the circles, north and sun drawn on it (needs a lens).
-    pub overlay: bool,
-    /// The per-pixel merge confidence as a grey picture.
-    pub confidence: bool,
-    /// The per-pixel consistency test as a picture (white = frames disagree; implies the test).
-    pub consistency: bool,
-    /// The equirectangular map (needs a lens).
-    pub equirect: Option<EquirectOptions>,
-    /// The 180° dome as Radiance's angular fish-eye (`-vta`, north up), whatever the lens's
-    /// projection, for Radiance's tools (needs a lens).
-    pub angular: bool,
-}
-
-/// Everything [`run`] is told besides the frames. Serialisable, so a web page can pass it as
-/// JSON; every field has a default.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct Options {
-    /// Camera response.
-    pub response: ResponseSource,
-    /// Sample calibration pixels inside this circle; default: the lens circle, if any.
-    pub calibration_circle: Option<Circle>,
-    /// Frame weighting of the merge.
-    pub weighting: Weighting,
-    /// Black level of the frames, 8-bit code (0 for most cameras, ≈ 16 for film scans): codes
-    /// at or below count as black.
-    pub black_level: u8,
-    /// Align hand-held frames by translation before calibrating and merging (see
-    /// [`crate::align`]).
-    pub align: bool,
-    /// Test every pixel for frames disagreeing beyond their noise (moving clouds, shifts);
-    /// the fraction goes to the report, with a warning above 2 %.
-    pub consistency: bool,
-    /// Ghost-aware merge (implies `consistency`): where frames disagree, keep what most frames
-    /// agree on (see [`MergeOptions::ghosts`](crate::merge::MergeOptions::ghosts)).
-    pub ghosts: bool,
-    /// Lens model.
-    pub lens: LensSource,
-    /// Sky geometry (with a lens).
-    pub sky: SkyOptions,
-    /// Products besides the radiance map.
-    pub products: Products,
-    /// Measurements that make the radiance absolute (see [`crate::photometry`]).
-    pub reference: crate::photometry::Reference,
-}
-
-/// A stage of [`run`], in order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Stage {
-    /// Decoding the photos.
-    Decoding,
-    /// Finding the lens circle.
-    Lens,
-    /// Calibrating the response.
-    Calibrating,
-    /// Merging.
-    Merging,
-    /// Crop, north, sun, maps.
-    Sky,
-    /// Tone-mapped pictures.
-    Pictures,
-}
-
-impl Stage {
-    /// Lower-case name for progress displays ("decoding", "calibrating", …).
-    pub fn name(self) -> &'static str {
-        match self {
-            Stage::Decoding => "decoding",
-            Stage::Lens => "lens",
-            Stage::Calibrating => "calibrating",
-            Stage::Merging => "merging",
-            Stage::Sky => "sky",
-            Stage::Pictures => "pictures",
-        }
-    }
-}
-
-/// A progress event: `fraction` of `stage` done, in `0..=1`. Each stage sends 0 when it starts
-/// and 1 when it ends, with steps in between where it has them (one per decoded frame).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Progress {
-    /// The stage.
-    pub stage: Stage,
-    /// Fraction done, `0..=1`.
-    pub fraction: f64,
-}
-
-/// A progress callback that ignores the events and never cancels.
-pub fn no_progress(_: &Progress) -> ControlFlow<()> {
-    ControlFlow::Continue(())
-}
-
-/// One frame in the report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FrameSummary {
-    /// Name (file name).
-    pub file: String,
-    /// Shutter time, seconds.
-    pub time_s: f64,
-    /// ISO, when known.
-    pub iso: Option<f64>,
-    /// f-number, when known.
-    pub f_number: Option<f64>,
-    /// Relative exposure `t · ISO / N²`.
-    pub relative_exposure: f64,
-}
-
-/// What [`run`] did, serialisable (the command line's `--json`).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Report {
-    /// Output width, pixels.
-    pub width: usize,
-    /// Output height, pixels.
-    pub height: usize,
-    /// The frames, shortest exposure first.
-    pub frames: Vec<FrameSummary>,
-    /// Where the response came from: "profile" or "calibrated on this bracket".
-    pub response: String,
-    /// What calibration sampling did, when it calibrated.
-    pub sampling: Option<SampleReport>,
-    /// Pixels clipped even in the shortest exposure (a lower bound).
-    pub clipped_high_pixels: usize,
-    /// Pixels black even in the longest exposure.
-    pub clipped_low_pixels: usize,
-    /// Pixels black in every channel of every frame (kept neutral).
-    pub black_pixels: usize,
-    /// The noise model the merge used (weighting `noise`, or the consistency test).
-    pub noise: Option<crate::noise::NoiseEstimate>,
-    /// Fraction of the tested pixels where frames disagree beyond their noise, when tested.
-    pub inconsistent_fraction: Option<f64>,
-    /// The translation of each frame, when aligned.
-    pub alignment: Option<crate::align::Alignment>,
-    /// The header metadata of the radiance map.
-    pub meta: HdrMeta,
-    /// The fish-eye results, with a lens.
-    pub geometry: Option<GeometryReport>,
-    /// The absolute calibration, when a measurement was given.
-    pub photometry: Option<crate::photometry::PhotometryReport>,
-    /// Warnings, in neutral words, one sentence each.
-    pub warnings: Vec<String>,
-}
-
-/// The products of [`run`].
-#[derive(Debug, Clone)]
-pub struct Dome {
-    /// Linear radiance, relative units (cropped to the dome when asked).
-    pub radiance: HdrImage,
-    /// Header metadata for [`Dome::radiance`].
-    pub meta: HdrMeta,
-    /// The equirectangular map and its metadata, when asked.
-    pub equirect: Option<(HdrImage, HdrMeta)>,
-    /// The angular (`-vta`) dome and its metadata (with `VIEW=`), when asked.
-    pub angular: Option<(HdrImage, HdrMeta)>,
-    /// The tone-mapped preview, when asked.
-    pub preview: Option<RgbImage<u8>>,
-    /// The overlay picture, when asked (else [`Dome::overlay_picture`] makes it later).
-    pub overlay: Option<RgbImage<u8>>,
-    /// What the overlay draws (output pixels), when there was a lens.
-    pub marks: Option<crate::overlay::OverlayMarks>,
-    /// The confidence picture (grey, black = no frame well exposed), when asked.
-    pub confidence: Option<RgbImage<u8>>,
-    /// The consistency picture (white = frames disagree beyond their noise), when asked.
-    pub consistency: Option<RgbImage<u8>>,
-    /// The camera profile made by calibrating on this bracket (with the camera's EXIF make,
-    /// model, ISO and date), when it calibrated.
-    pub camera_profile: Option<CameraProfile>,
-    /// The lens profile used, when there was a lens.
-    pub lens_profile: Option<LensProfile>,
-    /// The report.
-    pub report: Report,
-}
-
 /// Runs the job. `progress` receives [`Progress`] events and returns
 /// [`ControlFlow::Break`] to cancel, which ends the run with [`PipelineError::Cancelled`]
 /// at the next check (between frames and between stages).
@@ -463,193 +121,67 @@ pub fn run(
     options: &Options,
     progress: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Dome, PipelineError> {
-    let mut p = Reporter(progress);
+    let mut progress = Reporter(progress);
     check_options(options)?;
-    let mut br = read_bracket(input, &mut p)?;
-    let mut warnings = br.warnings.clone();
-    let alignment = if options.align {
-        let a = crate::align::align(&br.frames, &crate::align::AlignOptions::default());
-        br.frames = crate::align::apply_shifts(&br.frames, &a);
-        Some(a)
-    } else {
-        None
-    };
-
-    p.at(Stage::Lens, 0.0)?;
-    let lens = lens_profile(&options.lens, &br)?;
-    p.at(Stage::Lens, 1.0)?;
-
-    let circle = options
-        .calibration_circle
-        .or(lens.as_ref().map(|(l, _)| l.circle));
-    p.at(Stage::Calibrating, 0.0)?;
-    let (response, camera_profile, sampling, response_from) = match &options.response {
-        ResponseSource::Profile(prof) => (prof.response()?, None, None, "profile".to_string()),
-        ResponseSource::Calibrate(o) => {
-            let cal = response::calibrate(&br.frames, circle, o)?;
-            warnings.extend(cal.report().relaxed_warning());
-            warnings.extend(cal.report().shortfall_warning());
-            warnings.extend(cal.report().range_warning());
-            let mut prof = cal.to_profile();
-            describe_camera(&mut prof, &br);
-            let report = cal.report().clone();
-            let r = cal.response;
-            (
-                r,
-                Some(prof),
-                Some(report),
-                "calibrated on this bracket".to_string(),
-            )
-        }
-    };
-    p.at(Stage::Calibrating, 1.0)?;
-
-    p.at(Stage::Merging, 0.0)?;
-    let profile_noise = match &options.response {
-        ResponseSource::Profile(prof) => prof.noise.as_deref().copied(),
-        ResponseSource::Calibrate(_) => None,
-    };
-    let check = options.consistency || options.ghosts || options.products.consistency;
-    // Nothing after the merge reads the frames' pixels: give them back as the merge goes, so
-    // the frames and the radiance are never both whole in memory.
-    let merged = merge::merge_releasing(
-        &mut br.frames,
-        &response,
-        &MergeOptions {
-            weighting: options.weighting,
-            confidence: options.products.confidence,
-            // Only needed to count black pixels inside the lens circle.
-            clipped_mask: lens.is_some(),
-            noise: profile_noise,
-            black_level: options.black_level,
-            consistency: check,
-            ghosts: options.ghosts,
-        },
-    )?;
-    p.at(Stage::Merging, 1.0)?;
-    // Black pixels and disagreement are judged inside the lens circle when there is one (the
-    // housing outside is black in every frame by design).
-    warnings.extend(merged.warnings(lens.as_ref().map(|(l, _)| &l.circle)));
-    let inconsistent_fraction = merged
-        .inconsistent
-        .is_some()
-        .then(|| merged.inconsistent_fraction());
-    let camera_profile = camera_profile.map(|mut prof| {
-        prof.noise = merged.noise.filter(|n| n.fitted).map(|n| Box::new(n.model));
-        prof
-    });
-    let consistency = match (&merged.inconsistent, options.products.consistency) {
-        (Some(f), true) => {
-            let v: Vec<f32> = f.iter().map(|&b| b as f32).collect();
-            Some(crate::formats::picture::grey_picture(
-                br.width(),
-                br.height(),
-                &v,
-            )?)
-        }
-        _ => None,
-    };
-    if merged.clipped_high > 0 {
-        warnings.push(format!(
-            "{} pixels are clipped even in the shortest exposure; their radiance is a lower bound",
-            merged.clipped_high
-        ));
-    }
-    let confidence = match &merged.confidence {
-        Some(c) => Some(crate::formats::picture::grey_picture(
-            br.width(),
-            br.height(),
-            c,
-        )?),
-        None => None,
-    };
-
-    let (capdate, gmt) = br.info.header_times();
-    let mut meta = HdrMeta {
-        capdate,
-        gmt,
-        ..HdrMeta::default()
-    };
-    let mut radiance = merged.radiance;
-    if let Some((l, _)) = &lens {
-        if let Some(v) = &l.vignetting {
-            fisheye::devignette(&mut radiance, l, v);
-        }
-    }
-    let mut photometry =
-        calibrate_absolute(options, &br, lens.as_ref().map(|l| &l.0), &mut radiance)?;
-    let (mut geometry, mut equirect, mut angular, mut marks) = (None, None, None, None);
+    let mut br = read_bracket(input, &mut progress)?;
+    let alignment = options.align.then(|| align_frames(&mut br));
+    let lens = lens_stage(&options.lens, &br, &mut progress)?;
+    let lens_circle = lens.as_ref().map(|(l, _)| l.circle);
     let lens_profile = lens.as_ref().map(|(l, _)| l.clone());
-    let mut sun_from_reading = false;
-    if let Some(lens) = lens {
-        p.at(Stage::Sky, 0.0)?;
-        let facts = sky_stage::MergeFacts {
-            clipped: merged.clipped.as_deref(),
-            photometry: photometry.as_ref(),
-        };
-        let g = sky_stage::apply(options, &br, lens, radiance, facts)?;
-        if let Some(d) = &g.report.sun_disc {
-            if let Some(p) = photometry.as_mut() {
-                p.scale *= g.rescale;
-                p.patch_luminance_cd_m2 = p.patch_luminance_cd_m2.map(|l| l * g.rescale);
-                p.horizontal_illuminance_lux = Some(g.report.horizontal_illuminance);
-            }
-            sun_from_reading = d.from == crate::sun_disc::DirectSource::MeasuredIlluminance;
-        }
-        if let Some(p) = &photometry {
-            meta.other.push(absolute_header_line(p));
-        }
-        if let Some(d) = &g.report.sun_disc {
-            meta.other.push(d.header_line());
-        }
-        radiance = g.image;
-        meta.sun = g.meta.sun;
-        meta.north = g.meta.north;
-        meta.view = g.meta.view;
-        equirect = g.equirect.map(|e| (e, equirect_meta(&meta)));
-        angular = g.angular.map(|(img, m)| {
-            let m = HdrMeta {
-                view: m.view,
-                sun: m.sun,
-                north: m.north,
-                ..equirect_meta(&meta)
-            };
-            (img, m)
-        });
-        marks = Some(g.marks);
-        warnings.extend(g.warnings);
-        geometry = Some(g.report);
-        p.at(Stage::Sky, 1.0)?;
-    } else if let Some(p) = &photometry {
-        meta.other.push(absolute_header_line(p));
-    }
-    if let Some(p) = &photometry {
-        // A sun rebuilt from the illuminance reading is what the disagreement was.
-        let d = p.disagreement_percent.filter(|d| d.abs() > 10.0);
-        if let Some(d) = d.filter(|_| !sun_from_reading) {
-            warnings.push(format!(
-                "the dome's horizontal illuminance is {d:+.0} % off the illuminance reading (after the luminance reading's scale): a clipped sun, vignetting or a meter that saw a different sky"
-            ));
-        }
-    }
-
-    p.at(Stage::Pictures, 0.0)?;
-    let preview = match options.products.preview {
-        true => Some(tonemap::tonemap_u8(&radiance, &default_tonemap(None))?),
-        false => None,
+    let calibrated = response_stage(options, &br, lens_circle, &mut progress)?;
+    let MergeOutcome {
+        mut merged,
+        inconsistent_fraction,
+        warnings: merge_warnings,
+    } = merge_stage(
+        options,
+        &mut br,
+        &calibrated.response,
+        lens_circle,
+        &mut progress,
+    )?;
+    let merged_radiance = std::mem::replace(&mut merged.radiance, HdrImage::new(0, 0));
+    let clipped = merged.clipped.as_deref();
+    let SkyOutcome {
+        image: radiance,
+        photometry,
+        sky,
+    } = sky_stage::run(options, &br, lens, merged_radiance, clipped, &mut progress)?;
+    let meta = dome_meta(&br, photometry.as_ref(), sky.as_ref());
+    let marks = sky.as_ref().map(|s| s.marks);
+    let pictures = pictures_stage(
+        options,
+        &radiance,
+        marks.as_ref(),
+        &merged,
+        &br,
+        &mut progress,
+    )?;
+    let (equirect, angular, geometry, sky_warnings) = match sky.map(|s| sky_maps(s, &meta)) {
+        Some(m) => (m.equirect, m.angular, Some(m.report), m.warnings),
+        None => (None, None, None, Vec::new()),
     };
-    let overlay = match options.products.overlay {
-        true => overlay_of(&radiance, marks.as_ref())?,
-        false => None,
-    };
-    p.at(Stage::Pictures, 1.0)?;
-
+    // A sun rebuilt from the illuminance reading is what the reading's disagreement was.
+    let sun_from_reading = geometry
+        .as_ref()
+        .and_then(|g| g.sun_disc.as_ref())
+        .is_some_and(|d| d.from == DirectSource::MeasuredIlluminance);
+    let warnings = [
+        br.warnings.clone(),
+        calibrated.warnings,
+        merge_warnings,
+        sky_warnings,
+        photometry_warning(photometry.as_ref(), sun_from_reading)
+            .into_iter()
+            .collect(),
+    ]
+    .concat();
     let report = Report {
         width: radiance.width,
         height: radiance.height,
-        frames: br.frames.iter().map(frame_summary).collect(),
-        response: response_from,
-        sampling,
+        frames: br.frames.iter().map(FrameSummary::of).collect(),
+        response: calibrated.from.to_string(),
+        sampling: calibrated.sampling,
         clipped_high_pixels: merged.clipped_high,
         clipped_low_pixels: merged.clipped_low,
         black_pixels: merged.black_pixels,
@@ -661,19 +193,254 @@ pub fn run(
         photometry,
         warnings,
     };
+    // The profile made by calibrating carries the noise model the merge fitted.
+    let camera_profile = calibrated.profile.map(|mut prof| {
+        prof.noise = merged.noise.filter(|n| n.fitted).map(|n| Box::new(n.model));
+        prof
+    });
     Ok(Dome {
         radiance,
         meta,
         equirect,
         angular,
-        preview,
-        overlay,
+        preview: pictures.preview,
+        overlay: pictures.overlay,
         marks,
-        confidence,
-        consistency,
+        confidence: pictures.confidence,
+        consistency: pictures.consistency,
         camera_profile,
         lens_profile,
         report,
+    })
+}
+
+/// Aligns hand-held frames by translation (see [`crate::align`]).
+fn align_frames(br: &mut Bracket) -> Alignment {
+    let a = align::align(&br.frames, &AlignOptions::default());
+    br.frames = align::apply_shifts(&br.frames, &a);
+    a
+}
+
+/// What the response stage found.
+struct Calibrated {
+    response: Response,
+    /// The profile made by calibrating on this bracket (described from its EXIF).
+    profile: Option<CameraProfile>,
+    /// What calibration sampling did.
+    sampling: Option<SampleReport>,
+    /// Where the response came from, for the report.
+    from: &'static str,
+    warnings: Vec<String>,
+}
+
+/// The response stage: the camera profile's response, or a calibration on these frames,
+/// sampled inside [`Options::calibration_circle`] or else the lens circle.
+fn response_stage(
+    options: &Options,
+    br: &Bracket,
+    lens_circle: Option<Circle>,
+    progress: &mut Reporter<'_>,
+) -> Result<Calibrated, PipelineError> {
+    let circle = options.calibration_circle.or(lens_circle);
+    progress.at(Stage::Calibrating, 0.0)?;
+    let calibrated = match &options.response {
+        ResponseSource::Profile(prof) => Calibrated {
+            response: prof.response()?,
+            profile: None,
+            sampling: None,
+            from: "profile",
+            warnings: Vec::new(),
+        },
+        ResponseSource::Calibrate(o) => {
+            let cal = response::calibrate(&br.frames, circle, o)?;
+            let sampling = cal.report().clone();
+            let warnings = [
+                sampling.relaxed_warning(),
+                sampling.shortfall_warning(),
+                sampling.range_warning(),
+            ];
+            let mut profile = CameraProfile::from_calibration(&cal);
+            describe_camera(&mut profile, br);
+            Calibrated {
+                response: cal.response,
+                profile: Some(profile),
+                warnings: warnings.into_iter().flatten().collect(),
+                sampling: Some(sampling),
+                from: "calibrated on this bracket",
+            }
+        }
+    };
+    progress.at(Stage::Calibrating, 1.0)?;
+    Ok(calibrated)
+}
+
+/// What the merge stage found.
+struct MergeOutcome {
+    merged: Merged,
+    /// Fraction of the tested pixels where frames disagree, when tested.
+    inconsistent_fraction: Option<f64>,
+    warnings: Vec<String>,
+}
+
+/// The merge stage: linear radiance from the frames, whose pixels are given back as the merge
+/// goes (nothing after it reads them, so the frames and the radiance are never both whole in
+/// memory). Black pixels and disagreement are judged inside the lens circle when there is one
+/// (the housing outside is black in every frame by design).
+fn merge_stage(
+    options: &Options,
+    br: &mut Bracket,
+    response: &Response,
+    lens_circle: Option<Circle>,
+    progress: &mut Reporter<'_>,
+) -> Result<MergeOutcome, PipelineError> {
+    progress.at(Stage::Merging, 0.0)?;
+    let profile_noise = match &options.response {
+        ResponseSource::Profile(prof) => prof.noise.as_deref().copied(),
+        ResponseSource::Calibrate(_) => None,
+    };
+    let merged = merge::merge_releasing(
+        &mut br.frames,
+        response,
+        &MergeOptions {
+            weighting: options.weighting,
+            confidence: options.products.confidence,
+            // Only needed to count black pixels inside the lens circle.
+            clipped_mask: lens_circle.is_some(),
+            noise: profile_noise,
+            black_level: options.black_level,
+            consistency: options.consistency || options.ghosts || options.products.consistency,
+            ghosts: options.ghosts,
+        },
+    )?;
+    progress.at(Stage::Merging, 1.0)?;
+    let mut warnings = merged.warnings(lens_circle.as_ref());
+    if merged.clipped_high > 0 {
+        warnings.push(format!(
+            "{} pixels are clipped even in the shortest exposure; their radiance is a lower bound",
+            merged.clipped_high
+        ));
+    }
+    let inconsistent_fraction = merged
+        .inconsistent
+        .is_some()
+        .then(|| merged.inconsistent_fraction());
+    Ok(MergeOutcome {
+        merged,
+        inconsistent_fraction,
+        warnings,
+    })
+}
+
+/// The radiance map's header, every line in one place: the capture times; the units line of an
+/// absolute dome; and from the sky stage the line of a reconstructed sun, the sun, north and
+/// `VIEW=`.
+fn dome_meta(
+    br: &Bracket,
+    photometry: Option<&PhotometryReport>,
+    sky: Option<&SkyResult>,
+) -> HdrMeta {
+    let (capdate, gmt) = br.info.header_times();
+    let mut meta = HdrMeta {
+        capdate,
+        gmt,
+        ..HdrMeta::default()
+    };
+    if let Some(p) = photometry {
+        meta.other.push(absolute_header_line(p));
+    }
+    if let Some(s) = sky {
+        if let Some(d) = &s.report.sun_disc {
+            meta.other.push(d.header_line());
+        }
+        meta.sun = s.meta.sun;
+        meta.north = s.meta.north;
+        meta.view = s.meta.view.clone();
+    }
+    meta
+}
+
+/// The sky stage's products with their headers, which inherit the dome's ([`equirect_meta`]).
+struct SkyMaps {
+    equirect: Option<(HdrImage, HdrMeta)>,
+    angular: Option<(HdrImage, HdrMeta)>,
+    report: GeometryReport,
+    warnings: Vec<String>,
+}
+
+fn sky_maps(sky: SkyResult, dome: &HdrMeta) -> SkyMaps {
+    SkyMaps {
+        equirect: sky.equirect.map(|e| (e, equirect_meta(dome))),
+        angular: sky.angular.map(|(img, m)| {
+            let m = HdrMeta {
+                view: m.view,
+                sun: m.sun,
+                north: m.north,
+                ..equirect_meta(dome)
+            };
+            (img, m)
+        }),
+        report: sky.report,
+        warnings: sky.warnings,
+    }
+}
+
+/// The warning when the dome's horizontal illuminance is more than 10 % off the illuminance
+/// reading, unless the sun was rebuilt from that reading.
+fn photometry_warning(p: Option<&PhotometryReport>, sun_from_reading: bool) -> Option<String> {
+    let d = p?.disagreement_percent.filter(|d| d.abs() > 10.0);
+    d.filter(|_| !sun_from_reading).map(|d| {
+        format!(
+            "the dome's horizontal illuminance is {d:+.0} % off the illuminance reading (after the luminance reading's scale): a clipped sun, vignetting or a meter that saw a different sky"
+        )
+    })
+}
+
+/// The pictures asked for in [`Products`].
+struct Pictures {
+    preview: Option<RgbImage<u8>>,
+    overlay: Option<RgbImage<u8>>,
+    confidence: Option<RgbImage<u8>>,
+    consistency: Option<RgbImage<u8>>,
+}
+
+/// The pictures stage: the merge's consistency and confidence pictures (in the input photos'
+/// pixels), the preview and the overlay of the final dome; nothing unrequested is computed.
+fn pictures_stage(
+    options: &Options,
+    radiance: &HdrImage,
+    marks: Option<&OverlayMarks>,
+    merged: &Merged,
+    br: &Bracket,
+    progress: &mut Reporter<'_>,
+) -> Result<Pictures, PipelineError> {
+    let products = &options.products;
+    let (w, h) = (br.width(), br.height());
+    let consistency = match (&merged.inconsistent, products.consistency) {
+        (Some(f), true) => {
+            let v: Vec<f32> = f.iter().map(|&b| b as f32).collect();
+            Some(grey_picture(w, h, &v)?)
+        }
+        _ => None,
+    };
+    let confidence = match &merged.confidence {
+        Some(c) => Some(grey_picture(w, h, c)?),
+        None => None,
+    };
+    progress.at(Stage::Pictures, 0.0)?;
+    let preview = match products.preview {
+        true => Some(tonemap::tonemap_u8(radiance, &default_tonemap(None))?),
+        false => None,
+    };
+    let overlay = match products.overlay {
+        true => overlay_of(radiance, marks)?,
+        false => None,
+    };
+    progress.at(Stage::Pictures, 1.0)?;
+    Ok(Pictures {
+        preview,
+        overlay,
+        confidence,
+        consistency,
     })
 }
 
@@ -688,10 +455,10 @@ impl Dome {
 
 fn overlay_of(
     radiance: &HdrImage,
-    marks: Option<&crate::overlay::OverlayMarks>,
+    marks: Option<&OverlayMarks>,
 ) -> Result<Option<RgbImage<u8>>, PipelineError> {
     Ok(match marks {
-        Some(m) => Some(crate::overlay::overlay_picture(
+        Some(m) => Some(overlay::overlay_picture(
             radiance,
             m,
             &default_tonemap(m.visible),
@@ -730,53 +497,12 @@ pub fn describe_camera(profile: &mut CameraProfile, br: &Bracket) {
     profile.date = br.info.datetime_original.clone();
 }
 
-fn frame_summary(f: &bracket::Frame) -> FrameSummary {
-    FrameSummary {
-        file: f.name.clone(),
-        time_s: f.exposure.time_s,
-        iso: f.exposure.iso,
-        f_number: f.exposure.f_number,
-        relative_exposure: f.exposure.relative(),
-    }
-}
-
-/// Scales `radiance` to Radiance's absolute units when a measurement is given.
-fn calibrate_absolute(
-    o: &Options,
-    br: &Bracket,
-    lens: Option<&LensProfile>,
-    radiance: &mut HdrImage,
-) -> Result<Option<crate::photometry::PhotometryReport>, PipelineError> {
-    use crate::photometry;
-    let r = &o.reference;
-    if r.is_empty() {
-        return Ok(None);
-    }
-    let patch = match &r.luminance {
-        Some(s) => Some(photometry::patch_luminance(radiance, s)?),
-        None => None,
-    };
-    let illuminance = match (r.illuminance_lux, lens) {
-        (Some(_), Some(lens)) => {
-            let g = sky_stage::full_geometry(o, br, lens)?;
-            Some(crate::sky::radiance_luminance(
-                crate::reproject::horizontal_irradiance_fisheye(radiance, &g),
-            ))
-        }
-        _ => None,
-    };
-    let rep = photometry::absolute_scale(r, patch, illuminance)?;
-    let k = rep.scale as f32;
-    radiance.data.iter_mut().for_each(|v| *v *= k);
-    Ok(Some(rep))
-}
-
 /// The header comment that states the units of an absolute dome.
-fn absolute_header_line(p: &crate::photometry::PhotometryReport) -> String {
+fn absolute_header_line(p: &PhotometryReport) -> String {
     let mut s = format!(
         "{}: Radiance W/sr/m2, luminance = 179*(0.265 R + 0.670 G + 0.065 B) cd/m2; scaled by {} from the {} reading",
-        crate::formats::ABSOLUTE_UNITS_LINE,
-        crate::image::fmt_num(p.scale),
+        ABSOLUTE_UNITS_LINE,
+        fmt_num(p.scale),
         p.from
     );
     if let Some(d) = p.disagreement_percent {
@@ -810,18 +536,6 @@ fn check_options(o: &Options) -> Result<(), PipelineError> {
     match needs.iter().find(|(given, _)| *given) {
         Some((_, what)) => Err(PipelineError::NeedsLens(what)),
         None => Ok(()),
-    }
-}
-
-/// Forwards progress events and turns a cancel into an error.
-struct Reporter<'a>(&'a mut dyn FnMut(&Progress) -> ControlFlow<()>);
-
-impl Reporter<'_> {
-    fn at(&mut self, stage: Stage, fraction: f64) -> Result<(), PipelineError> {
-        match (self.0)(&Progress { stage, fraction }) {
-            ControlFlow::Continue(()) => Ok(()),
-            ControlFlow::Break(()) => Err(PipelineError::Cancelled),
-        }
     }
 }
 
@@ -880,8 +594,20 @@ fn decode_all(
     Ok(out)
 }
 
-/// The lens profile and, when the circle was detected, the fit.
-fn lens_profile(
+/// The lens stage: the lens profile and, when the circle was detected, the fit.
+fn lens_stage(
+    src: &LensSource,
+    br: &Bracket,
+    progress: &mut Reporter<'_>,
+) -> Result<Option<(LensProfile, Option<CircleFit>)>, PipelineError> {
+    progress.at(Stage::Lens, 0.0)?;
+    let lens = lens_of(src, br)?;
+    progress.at(Stage::Lens, 1.0)?;
+    Ok(lens)
+}
+
+/// The lens profile of `src` and, when the circle was detected, the fit.
+fn lens_of(
     src: &LensSource,
     br: &Bracket,
 ) -> Result<Option<(LensProfile, Option<CircleFit>)>, PipelineError> {

@@ -1,17 +1,21 @@
-//! The sky stage of the pipeline: crop, north, the sun, Radiance `VIEW=`, the equirectangular
-//! map and the overlay marks, on a merged fish-eye radiance map.
+//! The sky stage of the pipeline, on the merged radiance map: the lens's fall-off divided out
+//! and the absolute scale applied; then, with a lens, the crop (or level dome), north, the sun
+//! (found, cross-checked, and put back when it clipped), Radiance `VIEW=`, the maps and the
+//! overlay marks.
+
+use std::borrow::Cow;
 
 use serde::Serialize;
 use time::OffsetDateTime;
 
-use super::{default_equirect_width, Options, PipelineError, SunDisc, SunMode};
-use crate::bracket::Bracket;
-use crate::fisheye::LensKind;
-use crate::fisheye::{self, CircleFit, LensProfile};
-use crate::formats::{HdrMeta, PixelPoint, SunMark};
-use crate::image::{Circle, HdrImage};
+use super::progress::{Reporter, Stage};
+use super::{default_equirect_width, EquirectOptions, Options, PipelineError, SunDisc, SunMode};
+use crate::bracket::{self, Bracket};
+use crate::fisheye::{self, CircleFit, LensKind, LensProfile};
+use crate::formats::{HdrMeta, SunMark};
+use crate::image::{fmt_num, radiance_luminance, Circle, HdrImage, PixelPoint};
 use crate::overlay::OverlayMarks;
-use crate::photometry::PhotometryReport;
+use crate::photometry::{self, PhotometryReport};
 use crate::reproject::{self, MapProjection, ReprojectOptions};
 use crate::sky::{self, DevicePose, Direction, ImageOrientation, Site, SkyGeometry, SunCrossCheck};
 use crate::sun_disc::{self, DirectSource, SunDiscReport};
@@ -71,7 +75,7 @@ pub struct GeometryReport {
     /// then no shifted copy of the input's.
     pub levelled: bool,
     /// Horizontal illuminance of the dome (θ ≤ 90°, cosine-weighted), Radiance's way
-    /// ([`sky::radiance_luminance`] of the horizontal irradiance): lux when the radiance is
+    /// ([`radiance_luminance`] of the horizontal irradiance): lux when the radiance is
     /// absolute, relative units otherwise. What `evalglare -V` reports for the upward dome.
     pub horizontal_illuminance: f64,
     /// The solar disc put back in place of a sun clipped in every frame (see
@@ -136,18 +140,27 @@ impl GeometryReport {
     }
 }
 
-/// The sky stage's results.
-pub(super) struct SkyResult {
+/// What the sky stage leaves: the dome and its absolute calibration, and with a lens what the
+/// sky's geometry found.
+pub(super) struct SkyOutcome {
+    /// The dome: cropped or levelled as asked, its clipped sun put back.
     pub image: HdrImage,
+    /// The absolute calibration, when a measurement was given, with the scale in force on
+    /// [`SkyOutcome::image`] (a sun put back within an illuminance reading rescales the dome).
+    pub photometry: Option<PhotometryReport>,
+    /// The sky's results, with a lens.
+    pub sky: Option<SkyResult>,
+}
+
+/// The sky stage's results besides the dome.
+pub(super) struct SkyResult {
+    /// The sun, north and `VIEW=` of the dome.
     pub meta: HdrMeta,
     pub equirect: Option<HdrImage>,
     pub angular: Option<(HdrImage, HdrMeta)>,
     pub marks: OverlayMarks,
     pub report: GeometryReport,
     pub warnings: Vec<String>,
-    /// The factor the whole dome was scaled by to make room for a reconstructed sun within an
-    /// illuminance reading that set the scale alone (1 otherwise).
-    pub rescale: f64,
 }
 
 /// The geometry of the (possibly cropped) output and where input pixels land in it.
@@ -195,36 +208,78 @@ impl Framed {
     }
 }
 
-/// What the sky stage needs of the merge besides the radiance.
-pub(super) struct MergeFacts<'a> {
-    /// Per input pixel flags of [`crate::merge`] (`CLIPPED_HIGH` …), when computed.
-    pub clipped: Option<&'a [u8]>,
-    /// The absolute calibration, when one was made.
-    pub photometry: Option<&'a PhotometryReport>,
+/// The sky stage on `radiance` (the merged, uncropped photo): the lens's fall-off divided out,
+/// the absolute scale applied when a measurement is given, and with a lens the dome's geometry
+/// ([`apply`]). `clipped`: the merge's per-pixel flags (`CLIPPED_HIGH` …), when computed.
+pub(super) fn run(
+    o: &Options,
+    br: &Bracket,
+    lens: Option<(LensProfile, Option<CircleFit>)>,
+    mut radiance: HdrImage,
+    clipped: Option<&[u8]>,
+    progress: &mut Reporter<'_>,
+) -> Result<SkyOutcome, PipelineError> {
+    if let Some((l, _)) = &lens {
+        if let Some(v) = &l.vignetting {
+            fisheye::devignette(&mut radiance, l, v);
+        }
+    }
+    let photometry = calibrate_absolute(o, br, lens.as_ref().map(|l| &l.0), &mut radiance)?;
+    let Some(lens) = lens else {
+        return Ok(SkyOutcome {
+            image: radiance,
+            photometry,
+            sky: None,
+        });
+    };
+    progress.at(Stage::Sky, 0.0)?;
+    let out = apply(o, br, lens, radiance, clipped, photometry)?;
+    progress.at(Stage::Sky, 1.0)?;
+    Ok(out)
 }
 
-/// Runs the sky stage on `radiance` (the merged, uncropped photo).
-pub(super) fn apply(
+/// Scales `radiance` to Radiance's absolute units when a measurement is given.
+fn calibrate_absolute(
+    o: &Options,
+    br: &Bracket,
+    lens: Option<&LensProfile>,
+    radiance: &mut HdrImage,
+) -> Result<Option<PhotometryReport>, PipelineError> {
+    let r = &o.reference;
+    if r.is_empty() {
+        return Ok(None);
+    }
+    let patch = match &r.luminance {
+        Some(s) => Some(photometry::patch_luminance(radiance, s)?),
+        None => None,
+    };
+    let illuminance = match (r.illuminance_lux, lens) {
+        (Some(_), Some(lens)) => {
+            let g = full_geometry(o, br, lens)?;
+            Some(radiance_luminance(
+                reproject::horizontal_irradiance_fisheye(radiance, &g),
+            ))
+        }
+        _ => None,
+    };
+    let rep = photometry::absolute_scale(r, patch, illuminance)?;
+    let k = rep.scale as f32;
+    radiance.data.iter_mut().for_each(|v| *v *= k);
+    Ok(Some(rep))
+}
+
+/// The sky's geometry on the merged photo: north (from the sun when asked), the crop or the
+/// level dome, the sun found and, when it clipped, put back; the maps and the marks.
+fn apply(
     o: &Options,
     br: &Bracket,
     (lens, detected): (LensProfile, Option<CircleFit>),
     radiance: HdrImage,
-    facts: MergeFacts<'_>,
-) -> Result<SkyResult, PipelineError> {
-    let north_fix = match o.sky.north_from_sun {
-        true => Some(north_from_sun(o, br, &lens, &radiance)?),
-        false => None,
-    };
-    let fixed;
-    let o = match &north_fix {
-        Some(n) => {
-            let mut c = o.clone();
-            c.sky.north_deg = Some(n.north_deg);
-            fixed = c;
-            &fixed
-        }
-        None => o,
-    };
+    clipped: Option<&[u8]>,
+    mut photometry: Option<PhotometryReport>,
+) -> Result<SkyOutcome, PipelineError> {
+    let (o, north_fix) = with_north_from_sun(o, br, &lens, &radiance)?;
+    let o = o.as_ref();
     let s = &o.sky;
     let full = full_geometry(o, br, &lens)?;
     let mut f = match (s.level.is_some(), s.crop) {
@@ -233,74 +288,40 @@ pub(super) fn apply(
     };
     let horizon = f.geom.horizon_circle();
     let north = s.north_deg.map(|_| f.geom.north_point());
-    let ephemeris = ephemeris(o, br)?;
-    let (sun_px, source, confidence) = find_sun(s.sun, &f, &horizon, ephemeris.as_ref());
-    let sun_dir = sun_px.and_then(|p| f.geom.pixel_to_direction(p));
-    let cross = match (source, &sun_dir, &ephemeris) {
-        (Some(SunSource::Detected | SunSource::Tap), Some(d), Some(e)) => {
-            Some(sky::cross_check(d, e))
-        }
-        _ => None,
-    };
-    let mut warnings = Vec::new();
-    if let Some(c) = cross.filter(|c| c.angle_deg >= SUN_DISAGREEMENT_WARN_DEG) {
-        warnings.push(format!(
-            "detected sun is {:.1}° from the computed one; a compass error of {:+.1}° would explain the azimuth",
-            c.angle_deg, c.compass_error_deg
-        ));
-    }
-    let mut rescale = 1.0;
-    let disc = match (s.sun_disc, &sun_dir, facts.clipped) {
+    let sun = locate_sun(o, br, &f, &horizon)?;
+    let mut warnings: Vec<String> = sun.disagreement_warning().into_iter().collect();
+    let disc = match (s.sun_disc, &sun.direction, clipped) {
         (SunDisc::Reconstruct, Some(d), Some(mask)) => {
-            match reconstruct_sun(
-                o,
-                &mut f,
-                d,
-                (mask, br.width(), br.height()),
-                facts.photometry,
-            ) {
-                Some(Ok((r, k))) => {
-                    rescale = k;
-                    Some(r)
-                }
-                Some(Err(w)) => {
-                    warnings.push(w);
-                    None
-                }
-                None => None,
-            }
+            let mask = (mask, br.width(), br.height());
+            reconstruct_sun(o, &mut f, d, mask, photometry.as_ref())
+                .and_then(|r| r.map_err(|w| warnings.push(w)).ok())
         }
         _ => None,
     };
-    // An azimuth means something only when north is known, or the position came from it.
-    let azimuth_known = s.north_deg.is_some() || source == Some(SunSource::Ephemeris);
-    let sun = sun_px.map(|pixel| SunMark {
-        pixel,
-        azimuth_deg: sun_dir.filter(|_| azimuth_known).map(|d| d.azimuth_deg),
-        elevation_deg: sun_dir.map(|d| d.elevation_deg),
-    });
+    let horizontal_illuminance =
+        radiance_luminance(reproject::horizontal_irradiance_fisheye(&f.image, &f.geom));
+    if let (Some(&(_, rescale)), Some(p)) = (disc.as_ref(), photometry.as_mut()) {
+        p.scale *= rescale;
+        p.patch_luminance_cd_m2 = p.patch_luminance_cd_m2.map(|l| l * rescale);
+        p.horizontal_illuminance_lux = Some(horizontal_illuminance);
+    }
+    let mark = sun.mark(s.north_deg.is_some());
     // Only a crop is square and centred on the optical axis, as a Radiance view must be.
     let view = s
         .crop
         .then(|| f.geom.radiance_view(0.5 * f.image.width as f64))
         .flatten();
     let equirect = match &o.products.equirect {
-        Some(e) => Some(reproject::reproject(
-            &f.image,
-            &f.geom,
-            &MapProjection::Equirect {
-                width: e.width.unwrap_or_else(|| default_equirect_width(horizon.r)),
-                centre_azimuth_deg: 90.0,
-            },
-            &ReprojectOptions {
-                ground: e.ground,
-                ..ReprojectOptions::default()
-            },
-        )?),
+        Some(e) => Some(equirect_map(&f, e, horizon.r)?),
         None => None,
     };
     let angular = match o.products.angular {
-        true => Some(angular_map(&f, horizon.r, sun_dir, s.north_deg.is_some())?),
+        true => Some(angular_map(
+            &f,
+            horizon.r,
+            sun.direction,
+            s.north_deg.is_some(),
+        )?),
         false => None,
     };
     // A level dome is resampled: the lens's circle is no circle in it.
@@ -309,9 +330,9 @@ pub(super) fn apply(
         cy: lens.circle.cy - f.offset.1,
         r: lens.circle.r,
     });
-    Ok(SkyResult {
+    let sky = SkyResult {
         meta: HdrMeta {
-            sun,
+            sun: mark,
             north,
             view,
             ..HdrMeta::default()
@@ -322,7 +343,7 @@ pub(super) fn apply(
             visible,
             horizon: Some(horizon),
             north,
-            sun: sun_px,
+            sun: sun.pixel,
         },
         report: GeometryReport {
             lens,
@@ -330,29 +351,137 @@ pub(super) fn apply(
             crop_radius_px: f.crop_radius,
             horizon,
             north,
-            sun,
-            sun_source: sun_px.and(source),
-            sun_confidence: confidence,
-            sun_ephemeris: ephemeris,
-            sun_cross_check: cross,
+            sun: mark,
+            sun_source: sun.pixel.and(sun.source),
+            sun_confidence: sun.confidence,
+            sun_ephemeris: sun.ephemeris,
+            sun_cross_check: sun.cross_check,
             north_from_sun: north_fix,
             levelled: f.resampled_from.is_some(),
-            horizontal_illuminance: sky::radiance_luminance(
-                reproject::horizontal_irradiance_fisheye(&f.image, &f.geom),
-            ),
-            sun_disc: disc,
+            horizontal_illuminance,
+            sun_disc: disc.map(|(d, _)| d),
         },
-        image: f.image,
         warnings,
-        rescale,
+    };
+    Ok(SkyOutcome {
+        image: f.image,
+        photometry,
+        sky: Some(sky),
     })
+}
+
+/// The options with north set from the sun when [`SkyOptions::north_from_sun`](super::SkyOptions::north_from_sun)
+/// asks, and how it was set.
+fn with_north_from_sun<'a>(
+    o: &'a Options,
+    br: &Bracket,
+    lens: &LensProfile,
+    radiance: &HdrImage,
+) -> Result<(Cow<'a, Options>, Option<NorthFromSun>), PipelineError> {
+    if !o.sky.north_from_sun {
+        return Ok((Cow::Borrowed(o), None));
+    }
+    let n = north_from_sun(o, br, lens, radiance)?;
+    let mut fixed = o.clone();
+    fixed.sky.north_deg = Some(n.north_deg);
+    Ok((Cow::Owned(fixed), Some(n)))
+}
+
+/// The sun in the output: where (pixels and direction), how it was found, and how it compares
+/// with the ephemeris.
+struct SunFound {
+    pixel: Option<PixelPoint>,
+    direction: Option<Direction>,
+    source: Option<SunSource>,
+    /// Confidence of a detection.
+    confidence: Option<f64>,
+    /// The computed sun, when time and place are known.
+    ephemeris: Option<Direction>,
+    /// The detected or tapped sun against the computed one.
+    cross_check: Option<SunCrossCheck>,
+}
+
+impl SunFound {
+    /// The warning when the observed sun is [`SUN_DISAGREEMENT_WARN_DEG`] or more from the
+    /// computed one.
+    fn disagreement_warning(&self) -> Option<String> {
+        let c = self
+            .cross_check
+            .filter(|c| c.angle_deg >= SUN_DISAGREEMENT_WARN_DEG)?;
+        Some(format!(
+            "detected sun is {:.1}° from the computed one; a compass error of {:+.1}° would explain the azimuth",
+            c.angle_deg, c.compass_error_deg
+        ))
+    }
+
+    /// The sun as marked in the header: an azimuth means something only when north is known,
+    /// or the position came from it (the ephemeris).
+    fn mark(&self, north_known: bool) -> Option<SunMark> {
+        let azimuth_known = north_known || self.source == Some(SunSource::Ephemeris);
+        self.pixel.map(|pixel| SunMark {
+            pixel,
+            azimuth_deg: self
+                .direction
+                .filter(|_| azimuth_known)
+                .map(|d| d.azimuth_deg),
+            elevation_deg: self.direction.map(|d| d.elevation_deg),
+        })
+    }
+}
+
+/// Finds the sun in the framed dome as [`SkyOptions::sun`](super::SkyOptions::sun) says, and
+/// cross-checks an observed one with the ephemeris.
+fn locate_sun(
+    o: &Options,
+    br: &Bracket,
+    f: &Framed,
+    horizon: &Circle,
+) -> Result<SunFound, PipelineError> {
+    let ephemeris = ephemeris(o, br)?;
+    let (pixel, source, confidence) = find_sun(o.sky.sun, f, horizon, ephemeris.as_ref());
+    let direction = pixel.and_then(|p| f.geom.pixel_to_direction(p));
+    let cross_check = match (source, &direction, &ephemeris) {
+        (Some(SunSource::Detected | SunSource::Tap), Some(d), Some(e)) => {
+            Some(sky::cross_check(d, e))
+        }
+        _ => None,
+    };
+    Ok(SunFound {
+        pixel,
+        direction,
+        source,
+        confidence,
+        ephemeris,
+        cross_check,
+    })
+}
+
+/// The equirectangular map of the framed dome.
+fn equirect_map(
+    f: &Framed,
+    e: &EquirectOptions,
+    horizon_r: f64,
+) -> Result<HdrImage, PipelineError> {
+    Ok(reproject::reproject(
+        &f.image,
+        &f.geom,
+        &MapProjection::Equirect {
+            width: e.width.unwrap_or_else(|| default_equirect_width(horizon_r)),
+            centre_azimuth_deg: 90.0,
+        },
+        &ReprojectOptions {
+            ground: e.ground,
+            ..ReprojectOptions::default()
+        },
+    )?)
 }
 
 /// Puts the solar disc back when the sun at `sun` clipped in every frame (`mask`: the merge's
 /// per-pixel flags of the `width × height` input photos). `None`: nothing to do (the sun did
 /// not clip, or it is at or below the horizon, or the dome is not level); `Some(Err)`: a
-/// warning why the clipped sun was kept; `Some(Ok)`: the report and the factor the dome was
-/// rescaled by (see [`SkyResult::rescale`]).
+/// warning why the clipped sun was kept; `Some(Ok)`: the report and the factor the whole dome
+/// was scaled by to make room for the sun within an illuminance reading that set the scale
+/// alone (1 otherwise).
 fn reconstruct_sun(
     o: &Options,
     f: &mut Framed,
@@ -379,8 +508,7 @@ fn reconstruct_sun(
     if disc.is_empty() {
         return None;
     }
-    let total =
-        sky::radiance_luminance(reproject::horizontal_irradiance_fisheye(&f.image, &f.geom));
+    let total = radiance_luminance(reproject::horizontal_irradiance_fisheye(&f.image, &f.geom));
     let mut diffuse = total - sun_disc::disc_illuminance(&f.image, &disc);
     let el = sun.elevation_deg;
     let sin_h = el.to_radians().sin();
@@ -402,8 +530,8 @@ fn reconstruct_sun(
     if !(direct.is_finite() && direct > 0.0 && diffuse > 0.0 && rescale.is_finite()) {
         return Some(Err(format!(
             "the sun is clipped in every frame, but the dome without it already gives {} of the {} lux measured: the sun's disc was kept as merged (a lower bound)",
-            crate::image::fmt_num(diffuse.round()),
-            crate::image::fmt_num(reading.unwrap_or(f64::NAN).round())
+            fmt_num(diffuse.round()),
+            fmt_num(reading.unwrap_or(f64::NAN).round())
         )));
     }
     if rescale != 1.0 {
@@ -521,7 +649,7 @@ fn level_dome(
 /// The capture time: the given one, else EXIF's.
 fn capture_time(o: &Options, br: &Bracket) -> Result<Option<OffsetDateTime>, PipelineError> {
     match &o.sky.time {
-        Some(t) => crate::bracket::parse_iso8601(t)
+        Some(t) => bracket::parse_iso8601(t)
             .map(Some)
             .ok_or_else(|| PipelineError::BadTime(t.clone())),
         None => Ok(br.info.capture_time()),
@@ -587,7 +715,7 @@ fn angular_map(
     let size = (2.0 * horizon_r.ceil()).clamp(16.0, 32768.0) as usize;
     let target = MapProjection::Fisheye {
         size,
-        model: crate::fisheye::LensKind::Equidistant,
+        model: LensKind::Equidistant,
         fov_deg: 180.0,
     };
     let image = reproject::reproject(&f.image, &f.geom, &target, &ReprojectOptions::default())?;

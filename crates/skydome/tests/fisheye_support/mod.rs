@@ -210,24 +210,7 @@ pub fn to_u8(img: &HdrImage, k: f32, noise: f64, seed: u64) -> RgbImage<u8> {
     RgbImage::from_vec(img.width, img.height, data).expect("size")
 }
 
-/// The shared real-data folder, or `None` (after printing why) when it is absent.
-pub fn shared_data(sub: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data")
-        .join(sub);
-    if p.is_dir() {
-        Some(p)
-    } else {
-        // CI sets SKYDOME_REQUIRE_SHARED_DATA=1 so a broken data path fails instead of skipping.
-        assert!(
-            std::env::var("SKYDOME_REQUIRE_SHARED_DATA").as_deref() != Ok("1"),
-            "{} not found but SKYDOME_REQUIRE_SHARED_DATA=1",
-            p.display()
-        );
-        eprintln!("skipping: ../shared/data not found ({})", p.display());
-        None
-    }
-}
+pub use crate::common::shared_data;
 
 /// Loads an 8-bit RGB PNG (palette images are expanded).
 pub fn load_rgb8(path: &std::path::Path) -> RgbImage<u8> {

@@ -1,0 +1,13 @@
+//! The command line's integration tests, one module per subject, in one test binary (see
+//! `crates/skydome/tests/lib/main.rs` for why). `cargo test -p skydome-cli --test cli demo::`
+//! runs one subject's tests.
+
+#[path = "../../../skydome/tests/common/mod.rs"]
+mod common;
+
+mod bad_input;
+mod demo;
+mod flat_field;
+mod pipeline_identity;
+mod radiance_tools;
+mod real_sets;

@@ -1,0 +1,521 @@
+//! Finding the sun in a radiance image or a frame: a compact blob far brighter than the dome's
+//! median (the method and its confidence are described in the module documentation).
+
+use serde::{Deserialize, Serialize};
+
+use super::SkyError;
+use crate::image::PixelPoint;
+use crate::image::{luminance, Circle, HdrImage, RgbImage};
+
+/// A detected sun.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SunDetection {
+    /// Centroid of the sun blob, pixels.
+    pub pixel: PixelPoint,
+    /// Confidence in `[0, 1]` (see the module docs).
+    pub confidence: f64,
+    /// Blob area in pixels.
+    pub area_px: usize,
+    /// Peak (blurred) luminance over the dome's median luminance.
+    pub peak_to_background: f64,
+}
+
+/// Finds the sun in a radiance image inside `region` (usually the horizon circle).
+/// Returns `None` when no compact outstanding blob exists (overcast, sun hidden).
+pub fn detect_sun(img: &HdrImage, region: &Circle) -> Option<SunDetection> {
+    let luma: Vec<f32> = img.pixels().map(luminance).collect();
+    detect_sun_luma(&luma, img.width, img.height, region)
+        .ok()
+        .flatten()
+}
+
+/// [`detect_sun`] on an 8-bit frame (codes used as they are: pick a mid exposure where the sun
+/// is saturated but the sky is not).
+pub fn detect_sun_u8(img: &RgbImage<u8>, region: &Circle) -> Option<SunDetection> {
+    let luma: Vec<f32> = img
+        .data
+        .chunks_exact(3)
+        .map(|c| luminance([f32::from(c[0]), f32::from(c[1]), f32::from(c[2])]))
+        .collect();
+    detect_sun_luma(&luma, img.width, img.height, region)
+        .ok()
+        .flatten()
+}
+
+/// [`detect_sun`] on a luminance buffer (`width * height`, row-major, origin top-left).
+/// Errors only when the buffer size is wrong or the region is not a finite positive circle.
+pub fn detect_sun_luma(
+    luma: &[f32],
+    width: usize,
+    height: usize,
+    region: &Circle,
+) -> Result<Option<SunDetection>, SkyError> {
+    crate::image::check_samples(luma.len(), width, height, 1)?;
+    if !(region.r.is_finite() && region.r > 0.0 && region.cx.is_finite() && region.cy.is_finite()) {
+        return Err(SkyError::BadParameter {
+            what: "sun search radius (px)",
+            value: region.r,
+            hint: "give the dome's horizon circle",
+        });
+    }
+    // Bounding box of the region inside the frame.
+    let x0 = (region.cx - region.r).floor().max(0.0) as usize;
+    let y0 = (region.cy - region.r).floor().max(0.0) as usize;
+    let x1 = ((region.cx + region.r).ceil().max(0.0) as usize).min(width);
+    let y1 = ((region.cy + region.r).ceil().max(0.0) as usize).min(height);
+    if x1 <= x0 || y1 <= y0 {
+        return Ok(None);
+    }
+    let (bw, bh) = (x1 - x0, y1 - y0);
+    // Box blur of radius b over region pixels (outside pixels do not count).
+    let b = ((region.r / 150.0).round() as usize).max(1);
+    let blurred = region_box_mean(luma, width, (x0, y0, bw, bh), region, b);
+    let Some((background, peak)) = median_and_peak(&blurred) else {
+        return Ok(None);
+    };
+    let bg = background.max(peak * 1e-9).max(f32::MIN_POSITIVE);
+    let ratio = f64::from(peak / bg);
+    if !(peak > 0.0 && ratio >= 2.0) {
+        return Ok(None);
+    }
+    let t = background + 0.5 * (peak - background);
+    let mut blobs = blobs_above(&blurred, bw, bh, t, peak - background);
+    blobs.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let Some((best_energy, members)) = blobs.first() else {
+        return Ok(None);
+    };
+    let runner_up = blobs.get(1).map_or(0.0, |c| c.0);
+    let raw = |i: usize| {
+        let v = luma[(y0 + i / bw) * width + x0 + i % bw];
+        if v.is_finite() {
+            v.max(0.0)
+        } else {
+            0.0
+        }
+    };
+    let blob = Blob {
+        members,
+        bw,
+        background,
+    };
+    let (sun_x, sun_y, compactness) = blob.centre_and_compactness(raw);
+    let area = members.len() as f64;
+    let r_eq = (area / std::f64::consts::PI).sqrt() / region.r;
+    let size = ((0.20 - r_eq) / 0.12).clamp(0.0, 1.0);
+    let contrast = (ratio.log10() / 2.0).clamp(0.0, 1.0);
+    let ambiguity = 1.0 - (runner_up / best_energy).clamp(0.0, 1.0);
+    let confidence = compactness * size * contrast * ambiguity;
+    if confidence < 0.15 {
+        return Ok(None);
+    }
+    Ok(Some(SunDetection {
+        pixel: PixelPoint {
+            x: x0 as f64 + sun_x,
+            y: y0 as f64 + sun_y,
+        },
+        confidence,
+        area_px: members.len(),
+        peak_to_background: ratio,
+    }))
+}
+
+/// The 8-connected blobs of `blurred` (`bw` × `bh`, NaN outside the region) at or above `t`,
+/// each with its energy above `t` and its members (indices into `blurred`), in scan order.
+/// `range` is the peak above the background: saturated plateaus have no energy above `t`, so
+/// each member adds `1e-6 · range` and they still rank by area.
+fn blobs_above(
+    blurred: &[f32],
+    bw: usize,
+    bh: usize,
+    t: f32,
+    range: f32,
+) -> Vec<(f64, Vec<usize>)> {
+    let mut label = vec![0u32; bw * bh];
+    let mut blobs: Vec<(f64, Vec<usize>)> = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..bw * bh {
+        if label[start] != 0 || blurred[start].is_nan() || blurred[start] < t {
+            continue;
+        }
+        let id = blobs.len() as u32 + 1;
+        label[start] = id;
+        stack.push(start);
+        let mut members = Vec::new();
+        let mut energy = 0.0f64;
+        while let Some(i) = stack.pop() {
+            members.push(i);
+            energy += f64::from(blurred[i] - t);
+            let (x, y) = (i % bw, i / bw);
+            for ny in y.saturating_sub(1)..(y + 2).min(bh) {
+                for nx in x.saturating_sub(1)..(x + 2).min(bw) {
+                    let j = ny * bw + nx;
+                    if label[j] == 0 && blurred[j] >= t {
+                        label[j] = id;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        blobs.push((
+            energy + 1e-6 * f64::from(range) * members.len() as f64,
+            members,
+        ));
+    }
+    blobs
+}
+
+/// The winning blob: its members (indices into a box `bw` wide) and the dome's background.
+struct Blob<'a> {
+    members: &'a [usize],
+    bw: usize,
+    background: f32,
+}
+
+impl Blob<'_> {
+    /// The sun's centre in box pixels and the blob's compactness (its area over the area of
+    /// the smallest disc around its centroid that holds it, at most 1), given the unblurred
+    /// luminance `raw` of a member.
+    ///
+    /// Shape is judged around the blob's centroid; the sun's centre is the centroid of its core
+    /// (raw values within the top tenth of the blob's range): the sky's gradient and glare skew
+    /// the aureole around a clipped sun, not its saturated core.
+    fn centre_and_compactness(&self, raw: impl Fn(usize) -> f32) -> (f64, f64, f64) {
+        let (bw, background) = (self.bw, self.background);
+        let core = self
+            .members
+            .iter()
+            .map(|&i| raw(i))
+            .fold(background, f32::max);
+        let centroid = |floor: f32| {
+            let (mut sx, mut sy, mut sw) = (0.0f64, 0.0f64, 0.0f64);
+            for &i in self.members {
+                let (x, y) = (i % bw, i / bw);
+                let w = f64::from((raw(i) - floor).max(0.0)) + 1e-12;
+                sx += w * (x as f64 + 0.5);
+                sy += w * (y as f64 + 0.5);
+                sw += w;
+            }
+            (sx / sw, sy / sw)
+        };
+        let (mx, my) = centroid(background);
+        let (sun_x, sun_y) = centroid(background + 0.9 * (core - background));
+        let rmax = self
+            .members
+            .iter()
+            .map(|&i| ((i % bw) as f64 + 0.5 - mx).hypot((i / bw) as f64 + 0.5 - my))
+            .fold(0.0f64, f64::max)
+            + 0.5;
+        let area = self.members.len() as f64;
+        let compactness = (area / (std::f64::consts::PI * rmax * rmax)).min(1.0);
+        (sun_x, sun_y, compactness)
+    }
+}
+
+/// The median (the `n/2`-th smallest, as `select_nth_unstable`) and the largest of the
+/// non-NaN values (all non-negative and finite here), or `None` for fewer than 16.
+///
+/// Exact, in two passes instead of a copy and a selection of millions of values: for
+/// non-negative floats the bit patterns sort as the values do, so a histogram of the top 16
+/// bits finds the bin holding the median, and only that bin's values are selected among.
+fn median_and_peak(values: &[f32]) -> Option<(f32, f32)> {
+    let mut hist = vec![0u32; 1 << 16];
+    let (mut n, mut peak) = (0usize, 0.0f32);
+    for &v in values.iter().filter(|v| !v.is_nan()) {
+        hist[(v.to_bits() >> 16) as usize] += 1;
+        n += 1;
+        peak = crate::fastmath::max(v, peak);
+    }
+    if n < 16 {
+        return None;
+    }
+    let mut rank = n / 2;
+    let mut bin = 0;
+    for (b, &count) in hist.iter().enumerate() {
+        if rank < count as usize {
+            bin = b as u32;
+            break;
+        }
+        rank -= count as usize;
+    }
+    let mut in_bin: Vec<f32> = values
+        .iter()
+        .copied()
+        .filter(|v| !v.is_nan() && v.to_bits() >> 16 == bin)
+        .collect();
+    let median = *in_bin.select_nth_unstable_by(rank, f32::total_cmp).1;
+    Some((median, peak))
+}
+
+/// Mean of the pixels of `region` in the `(2b + 1)²` window around each pixel of the box
+/// `x0..x0 + bw`, `y0..y0 + bh` (row-major, `bw * bh`; outside pixels `NaN` and not counted;
+/// non-finite values count as 0, negative ones are clamped to 0).
+///
+/// Separable running sums (per row a prefix sum over the row's inside span, then per column a
+/// sliding sum over `2b + 1` rows, both in `f64`): two operations per pixel instead of the
+/// window's `(2b + 1)²` — a 12 MP dome has `b = 11`, 529 — which made the sun search cost more
+/// than decoding the frames. Row bands run in parallel with the `parallel` feature.
+fn region_box_mean(
+    luma: &[f32],
+    width: usize,
+    (x0, y0, bw, bh): (usize, usize, usize, usize),
+    region: &Circle,
+    b: usize,
+) -> Vec<f32> {
+    // Each row's inside pixels form one span `lo..hi` (box coordinates): the circle is convex.
+    let spans: Vec<(usize, usize)> = (0..bh)
+        .map(|y| {
+            let (a, e) = region.row_span(y0 + y, x0 + bw);
+            let (lo, hi) = (a.max(x0) - x0, e.max(x0) - x0);
+            (lo, hi.max(lo))
+        })
+        .collect();
+    let rows = &luma[y0 * width..];
+    let hsum = row_window_sums(rows, width, x0, bw, &spans, b);
+    column_window_means(&hsum, bw, &spans, b)
+}
+
+/// Per row `y` of the box (its samples at `rows[y * width + x0..][..bw]`), the sum of the
+/// values inside the row's span in the window `x − b ..= x + b` around each pixel (0 outside
+/// the span; non-finite values count as 0, negative ones as 0).
+fn row_window_sums(
+    rows: &[f32],
+    width: usize,
+    x0: usize,
+    bw: usize,
+    spans: &[(usize, usize)],
+    b: usize,
+) -> Vec<f32> {
+    let raw = |v: f32| if v.is_finite() { v.max(0.0) } else { 0.0 };
+    let mut hsum = vec![0.0f32; bw * spans.len()];
+    let horizontal = |(y, row): (usize, &mut [f32])| {
+        let (lo, hi) = spans[y];
+        if hi <= lo {
+            return;
+        }
+        let src = &rows[y * width + x0..][..bw];
+        let mut prefix = Vec::with_capacity(hi - lo + 1);
+        let mut acc = 0.0f64;
+        prefix.push(0.0f64);
+        for &v in &src[lo..hi] {
+            acc += f64::from(raw(v));
+            prefix.push(acc);
+        }
+        for (x, o) in row.iter_mut().enumerate() {
+            let a = x.saturating_sub(b).max(lo);
+            let e = (x + b + 1).min(hi);
+            if e > a {
+                *o = (prefix[e - lo] - prefix[a - lo]) as f32;
+            }
+        }
+    };
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        hsum.par_chunks_mut(bw).enumerate().for_each(horizontal);
+    }
+    #[cfg(not(feature = "parallel"))]
+    hsum.chunks_mut(bw).enumerate().for_each(horizontal);
+    hsum
+}
+
+/// The window means from [`row_window_sums`]: vertical sliding sums over `2b + 1` rows of the
+/// sums and of the inside-pixel counts (which follow from the spans), each band of 64 rows
+/// starting its own window; `NaN` outside the spans.
+fn column_window_means(hsum: &[f32], bw: usize, spans: &[(usize, usize)], b: usize) -> Vec<f32> {
+    let bh = spans.len();
+    let count = |x: usize, y: usize| {
+        let (lo, hi) = spans[y];
+        let a = x.saturating_sub(b).max(lo);
+        let e = (x + b + 1).min(hi);
+        e.saturating_sub(a)
+    };
+    const BAND: usize = 64;
+    let mut out = vec![f32::NAN; bw * bh];
+    let vertical = |(k, band): (usize, &mut [f32])| {
+        let ys = k * BAND;
+        let mut s = vec![0.0f64; bw];
+        let mut n = vec![0usize; bw];
+        let window = |y: usize| y.saturating_sub(b)..(y + b + 1).min(bh);
+        for yy in window(ys) {
+            for x in 0..bw {
+                s[x] += f64::from(hsum[yy * bw + x]);
+                n[x] += count(x, yy);
+            }
+        }
+        for (r, row) in band.chunks_exact_mut(bw).enumerate() {
+            let y = ys + r;
+            if r > 0 {
+                // Slide: row y + b enters, row y − b − 1 leaves.
+                if y + b < bh {
+                    let add = &hsum[(y + b) * bw..][..bw];
+                    for x in 0..bw {
+                        s[x] += f64::from(add[x]);
+                        n[x] += count(x, y + b);
+                    }
+                }
+                if y > b {
+                    let sub = &hsum[(y - b - 1) * bw..][..bw];
+                    for x in 0..bw {
+                        s[x] -= f64::from(sub[x]);
+                        n[x] -= count(x, y - b - 1);
+                    }
+                }
+            }
+            let (lo, hi) = spans[y];
+            for x in lo..hi {
+                row[x] = (s[x] / n[x] as f64) as f32;
+            }
+        }
+    };
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        out.par_chunks_mut(BAND * bw).enumerate().for_each(vertical);
+    }
+    #[cfg(not(feature = "parallel"))]
+    out.chunks_mut(BAND * bw).enumerate().for_each(vertical);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The window mean the way it reads: every window pixel tested, summed in `f64`.
+    fn box_mean_by_definition(
+        luma: &[f32],
+        width: usize,
+        (x0, y0, bw, bh): (usize, usize, usize, usize),
+        region: &Circle,
+        b: usize,
+    ) -> Vec<f32> {
+        let inside = |x: usize, y: usize| region.contains_pixel(x0 + x, y0 + y);
+        let mut out = vec![f32::NAN; bw * bh];
+        for y in 0..bh {
+            for x in 0..bw {
+                if !inside(x, y) {
+                    continue;
+                }
+                let (mut s, mut n) = (0.0f64, 0.0f64);
+                for yy in y.saturating_sub(b)..(y + b + 1).min(bh) {
+                    for xx in x.saturating_sub(b)..(x + b + 1).min(bw) {
+                        if inside(xx, yy) {
+                            let v = luma[(y0 + yy) * width + x0 + xx];
+                            s += if v.is_finite() {
+                                f64::from(v.max(0.0))
+                            } else {
+                                0.0
+                            };
+                            n += 1.0;
+                        }
+                    }
+                }
+                out[y * bw + x] = (s / n) as f32;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn median_by_histogram_is_the_selected_median() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        for n in [16usize, 17, 100, 4097, 100_000] {
+            for spread in [1.0f32, 1e-3, 1e6] {
+                let v: Vec<f32> = (0..n)
+                    .map(|i| {
+                        state ^= state << 13;
+                        state ^= state >> 7;
+                        state ^= state << 17;
+                        match i % 50 {
+                            0 => f32::NAN,
+                            1 => 0.0,
+                            // Ties: many equal values.
+                            2..=9 => 0.5 * spread,
+                            _ => (state % 1_000_000) as f32 / 1e6 * spread,
+                        }
+                    })
+                    .collect();
+                let mut finite: Vec<f32> = v.iter().copied().filter(|x| !x.is_nan()).collect();
+                let mid = finite.len() / 2;
+                let want = *finite.select_nth_unstable_by(mid, f32::total_cmp).1;
+                let peak = finite.iter().copied().fold(0.0f32, f32::max);
+                let want = (finite.len() >= 16).then_some((want, peak));
+                assert_eq!(median_and_peak(&v), want, "n {n} spread {spread}");
+            }
+        }
+        assert_eq!(median_and_peak(&[1.0; 15]), None);
+        assert_eq!(median_and_peak(&[f32::NAN; 40]), None);
+    }
+
+    #[test]
+    fn running_box_mean_equals_the_window_mean_by_definition() {
+        // Circles centred on and off pixel corners, cut by the frame's edges or not, windows
+        // from 1 to wider than the circle; values over 12 decades with NaN, ∞ and negatives.
+        let (w, h) = (157usize, 131usize);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let luma: Vec<f32> = (0..w * h)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                match state % 97 {
+                    0 => f32::NAN,
+                    1 => f32::INFINITY,
+                    2 => -3.0,
+                    k => 10f32.powf((k as f32 / 8.0) - 6.0),
+                }
+            })
+            .collect();
+        let circles = [
+            Circle {
+                cx: 78.5,
+                cy: 65.5,
+                r: 60.0,
+            },
+            Circle {
+                cx: 70.0,
+                cy: 60.0,
+                r: 80.3,
+            },
+            Circle {
+                cx: 10.2,
+                cy: 120.7,
+                r: 33.3,
+            },
+            Circle {
+                cx: 150.0,
+                cy: 3.0,
+                r: 4.6,
+            },
+            Circle {
+                cx: 40.5,
+                cy: 40.5,
+                r: 0.7,
+            },
+        ];
+        for region in &circles {
+            let x0 = (region.cx - region.r).floor().max(0.0) as usize;
+            let y0 = (region.cy - region.r).floor().max(0.0) as usize;
+            let x1 = ((region.cx + region.r).ceil() as usize).min(w);
+            let y1 = ((region.cy + region.r).ceil() as usize).min(h);
+            let bx = (x0, y0, x1 - x0, y1 - y0);
+            for b in [1, 2, 5, 11, 200] {
+                let fast = region_box_mean(&luma, w, bx, region, b);
+                let slow = box_mean_by_definition(&luma, w, bx, region, b);
+                for (i, (f, s)) in fast.iter().zip(&slow).enumerate() {
+                    assert_eq!(
+                        f.is_nan(),
+                        s.is_nan(),
+                        "inside test at {i}, {region:?}, b {b}"
+                    );
+                    if !s.is_nan() {
+                        assert!(
+                            (f - s).abs() <= 1e-5 * s.abs() + 1e-30,
+                            "{f} vs {s} at {i}, {region:?}, b {b}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,33 @@
+//! The library's integration tests, one module per subject, in one test binary: each test
+//! binary links the library and its dependencies anew, so one binary instead of two dozen
+//! saves minutes of linking on a small machine. `cargo test -p skydome --test lib merge::`
+//! runs one subject's tests.
+
+#[path = "../common/mod.rs"]
+mod common;
+#[path = "../fisheye_support/mod.rs"]
+mod fisheye_support;
+
+mod align;
+mod bracket_real;
+mod calibration;
+mod curve_range;
+mod fisheye;
+mod fisheye_overlay;
+mod formats_exr;
+mod formats_rgbe;
+mod independent_readers;
+mod merge;
+mod noise_merge;
+mod pipeline;
+mod plot;
+mod render;
+mod reproducible;
+mod reproject;
+mod sky;
+mod sun_truth;
+mod synth;
+mod tilt;
+mod tonemap;
+mod truncated_jpeg;
+mod vignetting;
