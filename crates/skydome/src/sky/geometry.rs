@@ -5,8 +5,8 @@ use serde::{Deserialize, Serialize};
 
 use super::{Direction, SkyError};
 use crate::fisheye::{LensProfile, Projection};
-use crate::image::PixelPoint;
 use crate::image::Circle;
+use crate::image::PixelPoint;
 
 /// How the phone lay while taking the sky photos (which camera looked at the zenith).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]

@@ -25,6 +25,7 @@ mod render;
 mod reproducible;
 mod reproject;
 mod sky;
+mod sun_sweep;
 mod sun_truth;
 mod synth;
 mod tilt;

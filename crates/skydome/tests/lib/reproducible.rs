@@ -1,6 +1,7 @@
 //! Reproducible bytes: every writer of the library, run twice on the same input, writes the
 //! same bytes (the batch runner's resume check and `scripts/same_bytes.sh` rely on it).
 
+use skydome::camera::CameraProfile;
 use skydome::fisheye::{LensKind, LensProfile};
 use skydome::formats::exr::{encode_exr, ExrCompression, ExrOptions, ExrPixelType};
 use skydome::formats::picture::{encode_rgb16, encode_rgb8, PictureFormat};
@@ -8,7 +9,6 @@ use skydome::formats::rgbe::encode_rgbe;
 use skydome::formats::{HdrMeta, PixelPoint, SunMark};
 use skydome::image::{Circle, HdrImage, RgbImage};
 use skydome::plot;
-use skydome::response::CameraProfile;
 
 /// A radiance map with a smooth ramp, a bright spot and some noise (xorshift, fixed seed).
 fn sky(width: usize, height: usize) -> HdrImage {
