@@ -219,17 +219,17 @@ pub struct SunClues<'a> {
     pub clipped: Option<&'a [bool]>,
     /// Where time and site put the sun (the ephemeris) and how far from it, in degrees, a
     /// detection is still taken for it (the compass's and the lens model's errors): a sun-like
-    /// blob within it wins over any other; none within it means no sun.
+    /// blob within it wins over any other.
     pub prior: Option<(Direction, f64)>,
 }
 
 /// Clipped cores larger than this (equivalent angular radius, degrees) are no sun: the disc is
 /// 0.53° across, and glare in a clipped frame grows it by a few pixels, not by degrees.
-pub const SUN_CORE_MAX_DEG: f64 = 3.0;
+pub const SUN_CORE_MAX_DEG: f64 = 4.5;
 
 /// A blob brighter than this many times the dome's median is sun-bright even where nothing
 /// clipped (the sun is ~10⁵ times the sky; a lit cloud is at most some tens of times).
-pub const SUN_BRIGHT_RATIO: f64 = 1000.0;
+pub const SUN_BRIGHT_RATIO: f64 = 300.0;
 
 /// Finds the sun in a dome `img` seen through `geom` (the search covers the horizon circle,
 /// `θ ≤ 90°`), with what else is known (`clues`). Unlike [`detect_sun`], which judges the blob
@@ -245,7 +245,7 @@ pub const SUN_BRIGHT_RATIO: f64 = 1000.0;
 ///   pixel, at most [`SUN_CORE_MAX_DEG`]) and **compact** (at least 30 % of the disc around its
 ///   centroid that holds it, measured in angle, so a low sun flattened by the projection counts
 ///   as round): a clipped cloud is large or ragged;
-/// - with a prior (time and site known), only blobs within its radius count, nearest first.
+/// - with a prior (time and site known), a blob within its radius wins, the nearest first.
 ///
 /// The sun's centre is the centroid of its core. Confidence = compactness × contrast
 /// (`log10(peak/median)/2`, capped at 1) × size (1 up to a core of 1°, falling to 0 at
@@ -344,9 +344,17 @@ pub fn find_sun(
                 .collect(),
         };
         let ratio = f64::from(m / bg);
-        if !(any_clipped || ratio >= SUN_BRIGHT_RATIO) || core.is_empty() {
+        // At the dome's ceiling: the brightest thing in it, ten times the median (a pixel JPEG
+        // pulled down to 253 in the shortest frame is clipped but not flagged).
+        let at_ceiling = m >= 0.8 * peak && ratio >= 10.0;
+        if !(any_clipped || at_ceiling || ratio >= SUN_BRIGHT_RATIO) || core.is_empty() {
             continue;
         }
+        // Without a clipped pixel, a small core is all that tells the sun from a lit cloud.
+        let core_limit = match any_clipped || ratio >= SUN_BRIGHT_RATIO {
+            true => SUN_CORE_MAX_DEG,
+            false => 1.0,
+        };
         // Centre: the core's centroid, weighted by luminance above the core's floor.
         let floor = core.iter().map(|&i| raw(i)).fold(f32::INFINITY, f32::min);
         let (mut sx, mut sy, mut sw, mut omega) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
@@ -415,7 +423,7 @@ pub fn find_sun(
         let n = core.len() as f64;
         let (ux, uy) = (ux / n, uy / n);
         let core_deg = (omega / std::f64::consts::PI).sqrt().to_degrees();
-        if core_deg > SUN_CORE_MAX_DEG {
+        if core_deg > core_limit {
             continue;
         }
         let Some(centre) = geom.pixel_to_vector(x, y) else {
@@ -448,11 +456,6 @@ pub fn find_sun(
         let off_prior = clues
             .prior
             .map(|(d, _)| Direction::from_vector(centre).angle_to(&d));
-        if let (Some(off), Some((_, radius))) = (off_prior, clues.prior) {
-            if off > radius {
-                continue;
-            }
-        }
         let contrast = (ratio.log10() / 2.0).clamp(0.0, 1.0);
         let size = ((SUN_CORE_MAX_DEG - core_deg) / (SUN_CORE_MAX_DEG - 1.0)).clamp(0.0, 1.0);
         candidates.push(Candidate {
@@ -467,10 +470,18 @@ pub fn find_sun(
             off_prior,
         });
     }
-    // With a prior the nearest sun-like blob wins; otherwise the best scored.
-    candidates.sort_by(|a, b| match (a.off_prior, b.off_prior) {
-        (Some(p), Some(q)) => p.total_cmp(&q),
-        _ => b.score.total_cmp(&a.score),
+    // With a prior a sun-like blob within its radius wins, the nearest first; otherwise (or
+    // when none is within it: a compass far off) the best scored.
+    let radius = clues.prior.map_or(0.0, |(_, r)| r);
+    let near = |c: &Candidate| c.off_prior.is_some_and(|o| o <= radius);
+    candidates.sort_by(|a, b| match (near(a), near(b)) {
+        (true, true) => a
+            .off_prior
+            .unwrap_or(0.0)
+            .total_cmp(&b.off_prior.unwrap_or(0.0)),
+        (true, false) => std::cmp::Ordering::Less,
+        (false, true) => std::cmp::Ordering::Greater,
+        (false, false) => b.score.total_cmp(&a.score),
     });
     let Some(best) = candidates.first() else {
         return Ok(None);
@@ -480,10 +491,10 @@ pub fn find_sun(
         .skip(1)
         .map(|c| c.score)
         .fold(0.0f64, f64::max);
-    let ambiguity = match best.off_prior {
+    let ambiguity = match near(best) {
         // The prior settles which is the sun.
-        Some(_) => 1.0,
-        None => 1.0 - (runner_up / best.score.max(1e-12)).clamp(0.0, 1.0),
+        true => 1.0,
+        false => 1.0 - (runner_up / best.score.max(1e-12)).clamp(0.0, 1.0),
     };
     let size = ((SUN_CORE_MAX_DEG - best.core_deg) / (SUN_CORE_MAX_DEG - 1.0)).clamp(0.0, 1.0);
     let confidence = best.compactness * best.contrast * size * ambiguity;

@@ -465,13 +465,14 @@ fn sweep_finds_every_visible_sun_and_no_false_one() {
         .filter(|s| s.split == "held-out")
         .cloned()
         .collect();
-    hold_to_targets("held-out", &held, 0.80);
+    hold_to_targets("held-out", &held, 0.85);
 }
 
 /// No false sun, every found sun within 0.5°, and at least `min_found` of the visible suns
-/// found. The target is all of them; the detector of this round finds 21 of the 26
-/// visible suns of the held-out half and 9 of the day's 12 (the misses are printed), so the
-/// rate is held where it stands and the target is still open.
+/// found. The target is all of them; this round finds every visible sun of the tune
+/// half and of the day, and 23 of the 26 of the held-out half (three hazy suns about 3° up,
+/// unclipped and only ~15× the median, are missed), so the held-out rate is held at 85 % and
+/// the target is still open there.
 fn hold_to_targets(label: &str, scores: &[Score], min_found: f64) {
     let false_suns: Vec<&str> = scores
         .iter()
@@ -524,5 +525,5 @@ fn a_stations_day_finds_the_sun_wherever_visible() {
         })
         .collect();
     table("day", &scores);
-    hold_to_targets("day", &scores, 0.70);
+    hold_to_targets("day", &scores, 1.0);
 }
