@@ -4,6 +4,7 @@
 #   scripts/bench.sh            # ≥ 5 alternating runs on 3 × 2448² JPEGs, then the scaling table
 #   scripts/bench.sh --quick    # the same, with a smaller scaling table (up to 24 MP)
 #   scripts/bench.sh --runs 9 --no-scaling
+#   scripts/bench.sh --batch    # only the station benchmark (issue #21), see below
 #
 # (1) `skydome merge A B C -o s.hdr --preview s.jpg` (calibration from the frames, preview on),
 # (2) the decode floor: the same three JPEGs decoded by libjpeg-turbo through Pillow, one thread,
@@ -12,6 +13,14 @@
 # memory). Prints medians, skydome/floor and OpenCV/skydome, and each one's peak memory; then
 # the whole fish-eye dome (lens, crop, sun, preview) on 3 × 12 MP; then `skydome merge` (no
 # preview) at 3, 5 and 9 frames × 6, 12, 24 and 50 MP.
+#
+# --batch: a synthetic station day (`skydome synth --captures`, EXIF times, one folder) of
+# $SKYDOME_BENCH_CAPTURES (default 8) captures of 3 × 6 MP and of 3 × 12 MP frames through
+# `skydome batch --fisheye --crop` with --jobs 1 and --jobs 2: captures per minute and peak memory;
+# the batch's overhead against the same captures as N separate `skydome merge` processes (same
+# options, one after the other, against --jobs 1: ≤ 10 % is the target); and "a year of 1-minute
+# captures" (525,600) in hours on this machine and on 10 and 100 such Slurm nodes, from the
+# measured cost per capture (ideal scaling: shards share nothing but the output folder).
 #
 # Needs python3 with venv, and /usr/bin/time (Debian: apt-get install time). The Python packages
 # (numpy, opencv-python-headless, Pillow) go into a virtual environment, $SKYDOME_BENCH_VENV or
@@ -23,13 +32,15 @@ cd "$(dirname "$0")/.."
 RUNS=5
 QUICK=0
 SCALING=1
+BATCH=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --quick) QUICK=1 ;;
     --runs) RUNS="$2"; shift ;;
     --no-scaling) SCALING=0 ;;
-    -h|--help) sed -n '2,20p' "$0"; exit 0 ;;
-    *) echo "bench.sh: unknown option $1 (use --quick, --runs N, --no-scaling)" >&2; exit 2 ;;
+    --batch) BATCH=1 ;;
+    -h|--help) sed -n '2,28p' "$0"; exit 0 ;;
+    *) echo "bench.sh: unknown option $1 (use --quick, --runs N, --no-scaling, --batch)" >&2; exit 2 ;;
   esac
   shift
 done
@@ -70,6 +81,61 @@ timed() {
     echo "bench.sh: $name failed:" >&2; cat "$WORK/.stderr" >&2; exit 1; }
   cat "$WORK/.time" >> "$WORK/$name.txt"
 }
+
+# --- --batch: the station benchmark (issue #21) ----------------------------------------------
+if [ "$BATCH" = 1 ]; then
+  N="${SKYDOME_BENCH_CAPTURES:-8}"
+  DOME=(--fisheye --lens-model equidistant --fov 235 --crop)
+  rm -f "$WORK"/batch_*.txt
+  for size in 2448 3464; do
+    D="$WORK/station_${size}_$N"
+    if [ ! -f "$D/IMG_$(printf %04d $((3 * N - 1))).jpg" ]; then
+      rm -rf "$D"; mkdir -p "$D"
+      echo "synthetic day: $N captures of 3 × ${size}²…" >&2
+      "$SKYDOME" synth -o "$D" --captures "$N" --interval 60 --size "$size" --quiet
+    fi
+    for j in 1 2; do
+      rm -rf "$WORK/batch_out"; mkdir -p "$WORK/batch_out"
+      echo "skydome batch -j $j on 3 × ${size}²…" >&2
+      timed "batch_${size}_j$j" "$SKYDOME" batch "$D" -o "$WORK/batch_out" "${DOME[@]}" -j "$j" --quiet
+    done
+    echo "$N separate skydome merge on 3 × ${size}²…" >&2
+    start=$(date +%s.%N)
+    for c in $(seq 0 $((N - 1))); do
+      fr=""
+      for f in 0 1 2; do fr="$fr $D/IMG_$(printf %04d $((3 * c + f))).jpg"; done
+      timed "batch_${size}_single" "$SKYDOME" merge $fr -o "$WORK/single.hdr" "${DOME[@]}" --force --quiet
+    done
+    end=$(date +%s.%N)
+    echo "$start $end" > "$WORK/batch_${size}_singles_wall.txt"
+  done
+  python3 - "$WORK" "$N" <<'PY'
+import sys
+work, n = sys.argv[1], int(sys.argv[2])
+def rows(name):
+    return [list(map(float, l.split())) for l in open(f"{work}/{name}.txt")]
+print(f"\nskydome batch on a synthetic station day, {n} captures of 3 frames, this machine")
+print(f"{'frames':14} {'jobs':>4} {'wall':>9} {'captures/min':>13} {'peak MB':>8}")
+best = {}
+for size, mp in [(2448, "3 × 6 MP"), (3464, "3 × 12 MP")]:
+    for j in (1, 2):
+        wall, peak, _, _ = rows(f"batch_{size}_j{j}")[0]
+        print(f"{mp:14} {j:>4} {wall:8.2f}s {60 * n / wall:13.1f} {peak / 1024:8.0f}")
+        best[size] = min(best.get(size, 1e9), wall / n)
+    singles = rows(f"batch_{size}_single")
+    total = sum(r[0] for r in singles)
+    b1 = rows(f"batch_{size}_j1")[0][0]
+    print(f"{mp:14}  {n} separate merges {total:7.2f}s (peak {max(r[1] for r in singles) / 1024:.0f} MB); "
+          f"batch -j 1 / separate = {b1 / total:.3f} (overhead {100 * (b1 / total - 1):+.1f} %)")
+print("\na year of 1-minute captures (525,600), from the best measured cost per capture:")
+print(f"{'frames':14} {'s/capture':>10} {'1 machine':>12} {'10 nodes':>10} {'100 nodes':>10}")
+for size, mp in [(2448, "3 × 6 MP"), (3464, "3 × 12 MP")]:
+    c = best[size]
+    h = 525600 * c / 3600
+    print(f"{mp:14} {c:10.3f} {h:10.1f} h {h / 10:8.1f} h {h / 100:8.2f} h")
+PY
+  exit 0
+fi
 
 # --- The head-to-head on 3 × 2448² ------------------------------------------------------------
 B="$WORK/bracket_2448_3"

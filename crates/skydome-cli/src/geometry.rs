@@ -11,7 +11,37 @@ use skydome::pipeline::{EquirectOptions, LensSource, Products, SkyOptions, SunDi
 use skydome::reproject::Ground;
 use skydome::sky::{DevicePose, Level};
 
-/// Fish-eye options of `skydome merge`.
+/// The map files `skydome merge` writes besides the dome (one capture, named files; `skydome
+/// batch` names its own).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct MapOutputs {
+    /// Also write an equirectangular (lat-long, 2:1) map of the dome (.hdr or .exr).
+    #[arg(long, value_name = "FILE")]
+    pub equirect: Option<PathBuf>,
+    /// Also write the 180° dome as Radiance's angular fish-eye (`VIEW= -vta`, north up, east
+    /// left), whatever the lens's projection: the dome Radiance's tools (evalglare) read.
+    #[arg(long, value_name = "FILE")]
+    pub angular: Option<PathBuf>,
+    /// Also write a preview with the circles, north (blue) and sun (yellow) drawn on it (.png/.jpg).
+    #[arg(long, value_name = "FILE")]
+    pub overlay: Option<PathBuf>,
+}
+
+impl MapOutputs {
+    /// Output paths given.
+    pub fn outputs(&self) -> Vec<&PathBuf> {
+        [
+            self.equirect.as_ref(),
+            self.angular.as_ref(),
+            self.overlay.as_ref(),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
+    }
+}
+
+/// Fish-eye options of `skydome merge` and `skydome batch`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct GeometryArgs {
     /// A lens profile from `skydome lens fit`.
@@ -78,22 +108,12 @@ pub struct GeometryArgs {
     /// Longitude in degrees, east positive (default: EXIF GPS).
     #[arg(long, allow_hyphen_values = true)]
     pub lon: Option<f64>,
-    /// Also write an equirectangular (lat-long, 2:1) map of the dome (.hdr or .exr).
-    #[arg(long, value_name = "FILE")]
-    pub equirect: Option<PathBuf>,
     /// Width of the equirectangular map in pixels (default: about 4× the horizon radius).
     #[arg(long)]
     pub equirect_width: Option<usize>,
     /// Lower hemisphere of the equirectangular map: black, mirror, or a constant R,G,B radiance.
     #[arg(long, default_value = "black", value_parser = parse_ground)]
     pub ground: Ground,
-    /// Also write the 180° dome as Radiance's angular fish-eye (`VIEW= -vta`, north up, east
-    /// left), whatever the lens's projection: the dome Radiance's tools (evalglare) read.
-    #[arg(long, value_name = "FILE")]
-    pub angular: Option<PathBuf>,
-    /// Also write a preview with the circles, north (blue) and sun (yellow) drawn on it (.png/.jpg).
-    #[arg(long, value_name = "FILE")]
-    pub overlay: Option<PathBuf>,
 }
 
 fn parse_gravity(s: &str) -> Result<[f64; 3], String> {
@@ -190,18 +210,6 @@ impl GeometryArgs {
         self.lens.is_some() || self.fisheye
     }
 
-    /// Output paths this part writes.
-    pub fn outputs(&self) -> Vec<&PathBuf> {
-        [
-            self.equirect.as_ref(),
-            self.angular.as_ref(),
-            self.overlay.as_ref(),
-        ]
-        .into_iter()
-        .flatten()
-        .collect()
-    }
-
     /// The lens source: a profile file, circle detection (or the given `circle`), or none.
     pub fn lens_source(&self, circle: Option<Circle>) -> Result<LensSource> {
         Ok(match (&self.lens, self.fisheye) {
@@ -248,12 +256,19 @@ impl GeometryArgs {
         }
     }
 
-    /// Adds the equirectangular map and the overlay to `products` when asked for.
-    pub fn products(&self, products: Products) -> Products {
+    /// Adds the maps to `products`: the overlay, the angular dome and the equirectangular map
+    /// (with this width and ground) when asked for.
+    pub fn products(
+        &self,
+        products: Products,
+        overlay: bool,
+        angular: bool,
+        equirect: bool,
+    ) -> Products {
         Products {
-            overlay: self.overlay.is_some(),
-            angular: self.angular.is_some(),
-            equirect: self.equirect.as_ref().map(|_| EquirectOptions {
+            overlay,
+            angular,
+            equirect: equirect.then_some(EquirectOptions {
                 width: self.equirect_width,
                 ground: self.ground,
             }),

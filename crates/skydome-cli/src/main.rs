@@ -4,9 +4,10 @@
 //! into library calls and file writes; no algorithm lives here.
 //!
 //! Exit codes: 0 success, 1 a failed run (one line `error: <file>: <what>` on stderr),
-//! 2 a usage error (reported by clap).
+//! 2 a usage error (reported by clap), 3 a batch that wrote its table but had failed captures.
 
 mod alloc;
+mod batch;
 mod calibrate;
 mod compare;
 mod demo;
@@ -50,6 +51,9 @@ enum Command {
     Calibrate(calibrate::Args),
     /// Merge a bracket into a radiance map (.hdr, optionally .exr and a preview).
     Merge(merge::Args),
+    /// A station's archive: group frames into captures, merge each, one table (captures.csv);
+    /// resumable, sharded on Slurm job arrays and Kubernetes Indexed Jobs.
+    Batch(batch::Args),
     /// Tone-map a radiance map to an 8-bit JPEG/PNG (or 16-bit PNG).
     Tonemap(tonemap::Args),
     /// Print a radiance file's header, size and statistics.
@@ -78,6 +82,10 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match dispatch(cli) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.downcast_ref::<batch::SomeFailed>().is_some() => {
+            eprintln!("error: {e}");
+            ExitCode::from(3)
+        }
         Err(e) => {
             // `{:#}` joins the context chain on one line: "error: sky.jpg: cannot decode: …".
             let msg = format!("{e:#}").replace('\n', " ");
@@ -98,6 +106,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Calibrate(a) => calibrate::run(a, quiet),
         Command::Merge(a) => merge::run(a, quiet),
+        Command::Batch(a) => batch::run(a, quiet),
         Command::Tonemap(a) => tonemap::run(a, quiet),
         Command::Info(a) => info::run(a),
         Command::Compare(a) => compare::run(a),

@@ -11,7 +11,7 @@ use skydome::photometry::{Reference, SpotLuminance};
 use skydome::pipeline::{self, Dome, Options, Products, Report, ResponseSource};
 
 use crate::calibrate::CalibArgs;
-use crate::geometry::GeometryArgs;
+use crate::geometry::{GeometryArgs, MapOutputs};
 use crate::io::{self, BracketArgs, Outputs};
 
 /// Arguments of `skydome merge`.
@@ -74,6 +74,8 @@ pub struct Args {
     pub calib: CalibArgs,
     #[command(flatten)]
     pub geometry: GeometryArgs,
+    #[command(flatten)]
+    pub maps: MapOutputs,
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
@@ -115,7 +117,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     ]
     .into_iter()
     .flatten()
-    .chain(a.geometry.outputs())
+    .chain(a.maps.outputs())
     .collect();
     for o in &outs {
         io::check_destination(o, &a.images, a.force)?;
@@ -161,12 +163,17 @@ fn options(a: &Args) -> Result<Options> {
         ghosts: a.ghosts,
         lens: a.geometry.lens_source(a.calib.circle)?,
         sky: a.geometry.sky(),
-        products: a.geometry.products(Products {
-            preview: a.preview.is_some(),
-            confidence: a.confidence.is_some(),
-            consistency: a.consistency.is_some(),
-            ..Products::default()
-        }),
+        products: a.geometry.products(
+            Products {
+                preview: a.preview.is_some(),
+                confidence: a.confidence.is_some(),
+                consistency: a.consistency.is_some(),
+                ..Products::default()
+            },
+            a.maps.overlay.is_some(),
+            a.maps.angular.is_some(),
+            a.maps.equirect.is_some(),
+        ),
         reference: Reference {
             luminance: a.luminance.map(|(x, y, cd)| SpotLuminance {
                 pixel: PixelPoint { x, y },
@@ -198,8 +205,8 @@ fn encode(a: &Args, dome: &Dome) -> Result<Outputs> {
         out.add(p, radiance(p, &dome.radiance, &dome.meta)?);
     }
     let maps = [
-        (&a.geometry.equirect, &dome.equirect),
-        (&a.geometry.angular, &dome.angular),
+        (&a.maps.equirect, &dome.equirect),
+        (&a.maps.angular, &dome.angular),
     ];
     for (path, map) in maps {
         if let (Some(p), Some((img, meta))) = (path, map) {
@@ -210,7 +217,7 @@ fn encode(a: &Args, dome: &Dome) -> Result<Outputs> {
         (&a.preview, &dome.preview),
         (&a.confidence, &dome.confidence),
         (&a.consistency, &dome.consistency),
-        (&a.geometry.overlay, &dome.overlay),
+        (&a.maps.overlay, &dome.overlay),
     ];
     for (path, img) in pictures {
         if let (Some(p), Some(img)) = (path, img) {

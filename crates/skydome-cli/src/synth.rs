@@ -29,6 +29,24 @@ pub struct Args {
     /// JPEG quality of the frames (0 writes lossless PNG instead).
     #[arg(long, default_value_t = 92)]
     pub quality: u8,
+    /// A station's day instead of one bracket: this many captures (seeds `seed`, `seed+1`, …)
+    /// written into one folder as IMG_0000.jpg, IMG_0001.jpg, … with EXIF exposure time, capture
+    /// time (frames 1 s apart) and UTC offset, for `skydome batch`.
+    #[arg(long, value_name = "N")]
+    pub captures: Option<usize>,
+    /// Time of the first capture (ISO 8601 with offset), with --captures.
+    #[arg(
+        long,
+        value_name = "ISO8601",
+        default_value = "2026-06-21T06:00:00+02:00"
+    )]
+    pub start: String,
+    /// Seconds between captures, with --captures.
+    #[arg(long, value_name = "SECONDS", default_value_t = 3600)]
+    pub interval: u32,
+    /// Latitude,longitude written as EXIF GPS, with --captures.
+    #[arg(long, value_name = "LAT,LON", allow_hyphen_values = true)]
+    pub gps: Option<String>,
     /// Replace existing files.
     #[arg(long)]
     pub force: bool,
@@ -53,6 +71,9 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         jpeg_quality: (a.quality > 0).then_some(a.quality),
         ..SynthOptions::default()
     };
+    if let Some(n) = a.captures {
+        return day(&a, &opts, n, quiet);
+    }
     let spin = io::spinner(quiet, "rendering");
     let b = synth::generate(&opts).context("synthetic bracket")?;
     spin.finish_and_clear();
@@ -98,6 +119,91 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         if !quiet {
             crate::out(&format!("wrote {}", p.display()));
         }
+    }
+    Ok(())
+}
+
+/// `--captures N`: a station's day of JPEGs with EXIF in one folder.
+fn day(a: &Args, opts: &SynthOptions, n: usize, quiet: bool) -> Result<()> {
+    use skydome::formats::exif::{insert_into_jpeg, ExifFields};
+    if a.quality == 0 {
+        bail!("--captures writes JPEGs (EXIF); give a --quality above 0");
+    }
+    let start = skydome::bracket::parse_iso8601(&a.start).with_context(|| {
+        format!(
+            "--start '{}': expected ISO 8601 with a UTC offset, e.g. 2026-06-21T06:00:00+02:00",
+            a.start
+        )
+    })?;
+    let gps = match &a.gps {
+        Some(g) => {
+            let v: Vec<f64> = g
+                .split(',')
+                .map(|t| t.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .with_context(|| format!("--gps '{g}': expected LAT,LON in degrees"))?;
+            match v[..] {
+                [lat, lon] => Some((lat, lon)),
+                _ => bail!("--gps '{g}': expected LAT,LON in degrees"),
+            }
+        }
+        None => None,
+    };
+    let (h, m, _) = start.offset().as_hms();
+    let offset = format!(
+        "{}{:02}:{:02}",
+        if start.offset().is_negative() {
+            '-'
+        } else {
+            '+'
+        },
+        h.unsigned_abs(),
+        m.unsigned_abs()
+    );
+    let bar = io::progress(quiet, n as u64, "rendering");
+    let mut out = Outputs::default();
+    let mut k = 0;
+    for c in 0..n {
+        let b = synth::generate(&SynthOptions {
+            seed: opts.seed + c as u64,
+            ..opts.clone()
+        })
+        .context("synthetic bracket")?;
+        for (i, f) in b.frames.iter().enumerate() {
+            let Pixels::U8(data) = &f.pixels else {
+                bail!("synthetic frames are 8-bit");
+            };
+            let img = RgbImage::from_vec(f.width, f.height, data.clone()).context("frame size")?;
+            let t = start + time::Duration::seconds(i64::from(a.interval) * c as i64 + i as i64);
+            let fields = ExifFields {
+                exposure_time_s: Some(f.exposure.time_s),
+                datetime_original: Some(format!(
+                    "{:04}:{:02}:{:02} {:02}:{:02}:{:02}",
+                    t.year(),
+                    u8::from(t.month()),
+                    t.day(),
+                    t.hour(),
+                    t.minute(),
+                    t.second()
+                )),
+                subsec_original: None,
+                offset_time_original: Some(offset.clone()),
+                gps_deg: gps,
+            };
+            let jpeg = insert_into_jpeg(&encode_jpeg(&img, 98)?, &fields).context("EXIF")?;
+            out.add(&a.output.join(format!("IMG_{k:04}.jpg")), jpeg);
+            k += 1;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let written = out.commit(&[], a.force)?;
+    if !quiet {
+        crate::out(&format!(
+            "wrote {} frames of {n} captures into {}",
+            written.len(),
+            a.output.display()
+        ));
     }
     Ok(())
 }

@@ -9,7 +9,7 @@
 //!
 //! ```text
 //! image, fastmath   pixels, circles, the bilinear sampler, luminance; fast maths
-//!   ─▶ bracket   decoding, EXIF, exposure times, the bracket's checks
+//!   ─▶ bracket   decoding, EXIF (lenient with piexif's), exposure times, the bracket's checks
 //!   ─▶ align   translation of hand-held frames
 //!   ─▶ sampling ─▶ response   calibration samples; response curves (Debevec & Malik)
 //!   ─▶ fisheye   lens circle, projections, lens profile and vignetting (flat fields need the response)
@@ -21,6 +21,7 @@
 //!   ─▶ tonemap ─▶ overlay, plot, render, compare   display and comparison
 //!   ─▶ synth   synthetic brackets with known radiance (tests, the demo)
 //!   ─▶ pipeline   runs the stages in order: bracket, lens, response, merge, sky, pictures
+//!   ─▶ batch   a station's archive: captures grouped, shards, one table row per pipeline run
 //! ```
 //!
 //! Two places differ from the order a photo travels in: `fisheye` sits above `response`
@@ -64,6 +65,7 @@
 //! `wasm32-unknown-unknown`.
 
 pub mod align;
+pub mod batch;
 pub mod bracket;
 pub mod camera;
 pub mod compare;

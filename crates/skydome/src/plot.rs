@@ -817,3 +817,227 @@ fn format_tick(v: f64) -> String {
         }
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// A station's day
+// ---------------------------------------------------------------------------------------------
+
+/// What became of one capture, for [`day_png`] and [`day_svg`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DayState {
+    /// Processed, the sun found.
+    Ok,
+    /// Processed, no sun found (clouds, or below the horizon): a hollow grey marker.
+    SunHidden,
+    /// The capture failed: a red cross along the bottom of both panels.
+    Failed,
+}
+
+/// One capture on the day plot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DayPoint {
+    /// Capture time in hours UTC from midnight of the first capture's day (may pass 24).
+    pub hour_utc: f64,
+    /// The dome's horizontal illuminance (lux when `absolute`, else relative units), when known.
+    pub illuminance: Option<f64>,
+    /// Sun elevation, degrees, when known.
+    pub sun_elevation_deg: Option<f64>,
+    /// What became of the capture.
+    pub state: DayState,
+}
+
+/// A station's day as a PNG of `size` pixels (200..=8000 each): horizontal illuminance (log
+/// scale) above and sun elevation below, both against time of day in UTC; failed captures are
+/// red crosses at the bottom of both panels and captures without a sun hollow grey circles.
+/// `absolute` labels the illuminance in lux. Points without a value are left out of a panel.
+pub fn day_png(
+    points: &[DayPoint],
+    absolute: bool,
+    size: (u32, u32),
+) -> Result<Vec<u8>, PlotError> {
+    render_png(size, |root| draw_day(root, points, absolute))
+}
+
+/// The same figure as [`day_png`] as an SVG document.
+pub fn day_svg(points: &[DayPoint], absolute: bool, size: (u32, u32)) -> Result<String, PlotError> {
+    check_size(size)?;
+    let mut out = String::new();
+    {
+        let root = embedded(SVGBackend::with_string(&mut out, size), false)?.into_drawing_area();
+        draw_day(&root, points, absolute)?;
+        root.present().map_err(draw_err)?;
+    }
+    Ok(out)
+}
+
+fn draw_day<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    points: &[DayPoint],
+    absolute: bool,
+) -> Result<(), PlotError> {
+    let hours: Vec<f64> = points
+        .iter()
+        .map(|p| p.hour_utc)
+        .filter(|h| h.is_finite())
+        .collect();
+    let (mut h0, mut h1) = hours
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
+            (a.min(h), b.max(h))
+        });
+    if !h0.is_finite() {
+        (h0, h1) = (0.0, 24.0);
+    }
+    let pad = ((h1 - h0) * 0.03).max(0.25);
+    let (x0, x1) = ((h0 - pad).floor().max(h0 - pad), h1 + pad);
+    let lux: Vec<f64> = points
+        .iter()
+        .filter_map(|p| p.illuminance)
+        .filter(|e| e.is_finite() && *e > 0.0)
+        .collect();
+    let (lo, hi) = lux
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &e| {
+            (a.min(e), b.max(e))
+        });
+    let (y0, y1) = if lo.is_finite() {
+        (lo / 2.0, hi * 2.0)
+    } else {
+        (0.1, 10.0)
+    };
+    let (w, h) = root.dim_in_pixel();
+    let fs = (w as f64 / 50.0).clamp(12.0, 32.0);
+    root.fill(&WHITE).map_err(draw_err)?;
+    let failed = points
+        .iter()
+        .filter(|p| p.state == DayState::Failed)
+        .count();
+    let hidden = points
+        .iter()
+        .filter(|p| p.state == DayState::SunHidden)
+        .count();
+    let title = format!(
+        "{} captures: {} ok, {} without a sun, {} failed",
+        points.len(),
+        points.len() - failed - hidden,
+        hidden,
+        failed
+    );
+    let (top, bottom) = root
+        .titled(&title, (FONT_FAMILY, fs * 1.15))
+        .map_err(draw_err)?
+        .split_vertically((h as f64 * 0.55) as u32);
+    let red = RGBColor(200, 30, 30);
+    let grey = RGBColor(130, 130, 130);
+    let ink = RGBColor(30, 70, 210);
+    let cross = |x: f64, y: f64, s: u32| {
+        let s = s as i32;
+        EmptyElement::at((x, y))
+            + PathElement::new(vec![(-s, -s), (s, s)], red.stroke_width(2))
+            + PathElement::new(vec![(-s, s), (s, -s)], red.stroke_width(2))
+    };
+    let dot = (w / 250).max(3);
+    {
+        let unit = if absolute { "lux" } else { "relative" };
+        let mut chart = ChartBuilder::on(&top)
+            .margin((fs * 0.6) as u32)
+            .x_label_area_size((fs * 1.8) as u32)
+            .y_label_area_size((fs * 4.5) as u32)
+            .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
+            .map_err(draw_err)?;
+        chart
+            .configure_mesh()
+            .y_desc(format!("horizontal illuminance ({unit})"))
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format_tick(*v))
+            .axis_desc_style((FONT_FAMILY, fs))
+            .label_style((FONT_FAMILY, fs * 0.85))
+            .light_line_style(RGBColor(240, 240, 240))
+            .bold_line_style(RGBColor(215, 215, 215))
+            .draw()
+            .map_err(draw_err)?;
+        let ok: Vec<(f64, f64)> = points
+            .iter()
+            .filter(|p| p.state != DayState::Failed)
+            .filter_map(|p| Some((p.hour_utc, p.illuminance.filter(|e| *e > 0.0)?)))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(ok.iter().copied(), ink.stroke_width(2)))
+            .map_err(draw_err)?;
+        chart
+            .draw_series(points.iter().filter_map(|p| {
+                let e = p.illuminance.filter(|e| *e > 0.0)?;
+                match p.state {
+                    DayState::Ok => Some(plotters::element::Circle::new(
+                        (p.hour_utc, e),
+                        dot,
+                        ink.filled(),
+                    )),
+                    DayState::SunHidden => Some(plotters::element::Circle::new(
+                        (p.hour_utc, e),
+                        dot + 1,
+                        grey.stroke_width(2),
+                    )),
+                    DayState::Failed => None,
+                }
+            }))
+            .map_err(draw_err)?;
+        let floor = y0 * 1.25;
+        chart
+            .draw_series(
+                points
+                    .iter()
+                    .filter(|p| p.state == DayState::Failed)
+                    .map(|p| cross(p.hour_utc, floor, dot + 2)),
+            )
+            .map_err(draw_err)?;
+    }
+    {
+        let mut chart = ChartBuilder::on(&bottom)
+            .margin((fs * 0.6) as u32)
+            .x_label_area_size((fs * 3.0) as u32)
+            .y_label_area_size((fs * 4.5) as u32)
+            .build_cartesian_2d(x0..x1, -10f64..90f64)
+            .map_err(draw_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("time of day (UTC, hours)")
+            .y_desc("sun elevation (°)")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0}"))
+            .axis_desc_style((FONT_FAMILY, fs))
+            .label_style((FONT_FAMILY, fs * 0.85))
+            .light_line_style(RGBColor(240, 240, 240))
+            .bold_line_style(RGBColor(215, 215, 215))
+            .draw()
+            .map_err(draw_err)?;
+        let sun = RGBColor(220, 140, 0);
+        chart
+            .draw_series(LineSeries::new(
+                points
+                    .iter()
+                    .filter_map(|p| Some((p.hour_utc, p.sun_elevation_deg?))),
+                sun.stroke_width(2),
+            ))
+            .map_err(draw_err)?;
+        chart
+            .draw_series(points.iter().filter_map(|p| {
+                let el = p.sun_elevation_deg?;
+                let style = match p.state {
+                    DayState::Ok => sun.filled(),
+                    _ => grey.stroke_width(2),
+                };
+                Some(plotters::element::Circle::new((p.hour_utc, el), dot, style))
+            }))
+            .map_err(draw_err)?;
+        chart
+            .draw_series(
+                points
+                    .iter()
+                    .filter(|p| p.state == DayState::Failed)
+                    .map(|p| cross(p.hour_utc, -6.0, dot + 2)),
+            )
+            .map_err(draw_err)?;
+    }
+    Ok(())
+}

@@ -87,21 +87,36 @@ fn demo_writes_every_output_and_marks_the_known_sun() {
         "{}",
         String::from_utf8_lossy(&o2.stderr)
     );
-    let names = |d: &std::path::Path| {
-        let mut v: Vec<String> = std::fs::read_dir(d)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
+    // Every file, in sub-folders too (the demo copies its bracket into `bracket/`), by
+    // path relative to the output folder.
+    fn names(root: &std::path::Path, sub: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+        for e in std::fs::read_dir(root.join(sub)).unwrap() {
+            let rel = sub.join(e.unwrap().file_name());
+            if root.join(&rel).is_dir() {
+                names(root, &rel, out);
+            } else {
+                out.push(rel);
+            }
+        }
+    }
+    let list = |d: &std::path::Path| {
+        let mut v = Vec::new();
+        names(d, std::path::Path::new(""), &mut v);
         v.sort();
         v
     };
-    assert_eq!(names(&dir), names(&other));
-    for f in names(&dir) {
+    assert_eq!(list(&dir), list(&other));
+    assert!(list(&dir).len() > 10, "{:?}", list(&dir));
+    for f in list(&dir) {
         let (a, b) = (
             std::fs::read(dir.join(&f)).unwrap(),
             std::fs::read(other.join(&f)).unwrap(),
         );
-        assert!(a == b, "{f}: the two runs wrote different bytes");
+        assert!(
+            a == b,
+            "{}: the two runs wrote different bytes",
+            f.display()
+        );
     }
 }
 

@@ -6,6 +6,8 @@
 mod common;
 
 mod bad_input;
+mod batch;
+mod batch_slurm;
 mod demo;
 mod flat_field;
 mod pipeline_identity;

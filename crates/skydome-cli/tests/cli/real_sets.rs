@@ -204,7 +204,7 @@ fn frobisher_frame_cut_short_is_refused_by_name() {
 /// name; the bracket is then refused for what it is: the camera ignored the bracket.
 #[test]
 fn ssarcandy_three_column_list_is_read_and_the_ignored_bracket_refused() {
-    let Some(data) = shared() else {
+    let Some(data) = data_dir() else {
         return;
     };
     let dir = data.join("ssarcandy_street");

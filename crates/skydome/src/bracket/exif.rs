@@ -72,10 +72,76 @@ pub(super) fn format_exif_datetime(t: time::PrimitiveDateTime) -> String {
     )
 }
 
+/// A file's EXIF exposure and capture metadata, read without decoding its pixels (what a batch
+/// needs to group a folder of frames into captures).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FileMetadata {
+    /// Exposure time in seconds, when EXIF has a valid one.
+    pub exposure_time_s: Option<f64>,
+    /// Capture metadata (time, offset, GPS, camera).
+    pub info: super::CaptureInfo,
+}
+
+impl FileMetadata {
+    /// The capture's local clock reading with its fraction of a second
+    /// (`DateTimeOriginal` + `SubSecTimeOriginal`), when EXIF has the time.
+    pub fn local_time(&self) -> Option<time::PrimitiveDateTime> {
+        let t = parse_exif_datetime(self.info.datetime_original.as_deref()?)?;
+        let frac = self
+            .info
+            .subsec_original
+            .as_deref()
+            .map(str::trim)
+            .filter(|s| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit()))
+            .and_then(|s| format!("0.{s}").parse::<f64>().ok())
+            .unwrap_or(0.0);
+        Some(t + time::Duration::seconds_f64(frac))
+    }
+}
+
+/// Reads a file's EXIF (JPEG, PNG, TIFF bytes; the head of a JPEG is enough) without decoding
+/// its pixels. A file without readable EXIF gives empty metadata.
+pub fn read_metadata(bytes: &[u8]) -> FileMetadata {
+    let mut frame = DecodedFrame {
+        name: String::new(),
+        width: 0,
+        height: 0,
+        pixels: super::Pixels::U8(Vec::new()),
+        exif_time_s: None,
+        iso: None,
+        f_number: None,
+        info: super::CaptureInfo {
+            orientation: 1,
+            ..super::CaptureInfo::default()
+        },
+        non_srgb_icc: None,
+    };
+    read_exif(bytes, &mut frame);
+    FileMetadata {
+        exposure_time_s: frame.exif_time_s,
+        info: frame.info,
+    }
+}
+
+/// Parses the file's EXIF; when the strict reader refuses it, the block re-encoded by
+/// [`super::tiff::relink`] (EXIF written by Python's `piexif` has sub-IFDs without
+/// their next-IFD link, which kamadak-exif stops at while Pillow, exifread and exiftool read
+/// on): what can be read is read.
+fn parse(bytes: &[u8]) -> Option<exif::Exif> {
+    match exif::Reader::new().read_from_container(&mut Cursor::new(bytes)) {
+        Ok(ex) => Some(ex),
+        Err(_) => {
+            let block = super::tiff::jpeg_exif_block(bytes)?;
+            let fixed = super::tiff::relink(block)?;
+            exif::Reader::new().read_raw(fixed).ok()
+        }
+    }
+}
+
 /// Fills exposure and capture metadata from the file's EXIF, when it has any.
 pub(super) fn read_exif(bytes: &[u8], frame: &mut DecodedFrame) {
     use exif::{In, Tag, Value};
-    let Ok(ex) = exif::Reader::new().read_from_container(&mut Cursor::new(bytes)) else {
+    let Some(ex) = parse(bytes) else {
         return;
     };
     let get = |tag| ex.get_field(tag, In::PRIMARY).map(|f| &f.value);
@@ -85,6 +151,9 @@ pub(super) fn read_exif(bytes: &[u8], frame: &mut DecodedFrame) {
             Value::SRational(r) => r.first().map(|r| r.to_f64()),
             Value::Short(s) => s.first().map(|&s| f64::from(s)),
             Value::Long(s) => s.first().map(|&s| f64::from(s)),
+            // Pillow writes Python floats as DOUBLE.
+            Value::Double(d) => d.first().copied(),
+            Value::Float(f) => f.first().map(|&f| f64::from(f)),
             _ => None,
         }?;
         (v.is_finite() && v > 0.0).then_some(v)
@@ -125,6 +194,7 @@ pub(super) fn read_exif(bytes: &[u8], frame: &mut DecodedFrame) {
     info.model = text(Tag::Model);
     info.datetime_original = text(Tag::DateTimeOriginal);
     info.utc_offset = text(Tag::OffsetTimeOriginal).or_else(|| text(Tag::OffsetTime));
+    info.subsec_original = text(Tag::SubSecTimeOriginal);
     info.gps_latitude_deg = dms(Tag::GPSLatitude, Tag::GPSLatitudeRef);
     info.gps_longitude_deg = dms(Tag::GPSLongitude, Tag::GPSLongitudeRef);
     info.white_balance = get(Tag::WhiteBalance).and_then(|v| v.get_uint(0));

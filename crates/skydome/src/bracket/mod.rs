@@ -24,11 +24,12 @@
 mod checks;
 mod decode;
 mod exif;
+pub mod tiff;
 mod times;
 
 pub use checks::assemble;
 pub use decode::{check_jpeg_complete, decode};
-pub use exif::{parse_exif_datetime, parse_iso8601, parse_utc_offset};
+pub use exif::{parse_exif_datetime, parse_iso8601, parse_utc_offset, read_metadata, FileMetadata};
 pub use times::{parse_list_file, parse_time, parse_times, times_from_list};
 
 use exif::format_exif_datetime;
@@ -158,6 +159,10 @@ pub struct CaptureInfo {
     pub datetime_original: Option<String>,
     /// UTC offset of the capture time, `±HH:MM` (`OffsetTimeOriginal`, else `OffsetTime`).
     pub utc_offset: Option<String>,
+    /// Fraction of a second of the capture time, as written (`SubSecTimeOriginal`: the digits
+    /// after the decimal point, `"25"` = 0.25 s).
+    #[serde(default)]
+    pub subsec_original: Option<String>,
     /// Latitude in degrees, north positive (`GPSLatitude` + `GPSLatitudeRef`).
     pub gps_latitude_deg: Option<f64>,
     /// Longitude in degrees, east positive (`GPSLongitude` + `GPSLongitudeRef`).

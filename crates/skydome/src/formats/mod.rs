@@ -7,10 +7,13 @@
 //! - The JSON of a camera profile and a lens profile is read and written by the profiles'
 //!   own `to_json`/`from_json` ([`crate::camera::CameraProfile`],
 //!   [`crate::fisheye::LensProfile`]).
+//! - [`exif`]: EXIF as stations write it: a writer for the capture fields (synthetic days) and a
+//!   lenient re-encoder for blocks that strict readers refuse (piexif's sub-IFDs).
 //! - [`picture`]: 8-bit JPEG/PNG and 16-bit PNG display pictures (previews, overlays, maps).
 
 use crate::image::HdrImage;
 
+pub mod exif;
 pub mod exr;
 pub mod picture;
 pub mod rgbe;

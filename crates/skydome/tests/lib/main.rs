@@ -12,6 +12,7 @@ mod align;
 mod bracket_real;
 mod calibration;
 mod curve_range;
+mod exif_stations;
 mod fisheye;
 mod fisheye_overlay;
 mod formats_exr;
