@@ -336,7 +336,18 @@ pub fn find_sun(
         let m = members.iter().map(|&i| raw(i)).fold(0.0f32, f32::max);
         let any_clipped = members.iter().any(|&i| clipped(i));
         let core: Vec<usize> = match any_clipped {
-            true => members.iter().copied().filter(|&i| clipped(i)).collect(),
+            // Closed (3 × 3): a JPEG's ringing leaves a clipped core with unflagged holes and
+            // gaps (a pixel reading 253 in the shortest frame), which would make a round sun
+            // look ragged.
+            true => close_within(
+                &members
+                    .iter()
+                    .copied()
+                    .filter(|&i| clipped(i))
+                    .collect::<Vec<_>>(),
+                members,
+                bw,
+            ),
             false => members
                 .iter()
                 .copied()
@@ -510,6 +521,59 @@ pub fn find_sun(
         area_px: best.area,
         peak_to_background: best.ratio,
     }))
+}
+
+/// The morphological closing (a 3 × 3 dilation, then a 3 × 3 erosion) of the pixel set `set`
+/// (indices into a box `bw` wide), kept to `members`, in scan order: holes and gaps a pixel or
+/// two wide inside `set` are filled, its outline stays where it was.
+fn close_within(set: &[usize], members: &[usize], bw: usize) -> Vec<usize> {
+    let Some((&first, _)) = set.split_first() else {
+        return Vec::new();
+    };
+    // A local grid around the set, two pixels of margin (the dilation's reach plus the
+    // erosion's), in signed box coordinates.
+    let xy = |i: usize| ((i % bw) as i64, (i / bw) as i64);
+    let (mut lx, mut ly, mut hx, mut hy) = {
+        let (x, y) = xy(first);
+        (x, y, x, y)
+    };
+    for &i in set {
+        let (x, y) = xy(i);
+        (lx, ly, hx, hy) = (lx.min(x), ly.min(y), hx.max(x), hy.max(y));
+    }
+    let (lx, ly) = (lx - 2, ly - 2);
+    let (gw, gh) = ((hx + 3 - lx) as usize, (hy + 3 - ly) as usize);
+    let cell = |x: i64, y: i64| -> Option<usize> {
+        let (gx, gy) = (x - lx, y - ly);
+        (gx >= 0 && gy >= 0 && (gx as usize) < gw && (gy as usize) < gh)
+            .then(|| gy as usize * gw + gx as usize)
+    };
+    let mut grid = vec![false; gw * gh];
+    for &i in set {
+        let (x, y) = xy(i);
+        if let Some(c) = cell(x, y) {
+            grid[c] = true;
+        }
+    }
+    let around = |g: &[bool], x: i64, y: i64, all: bool| {
+        let mut n = (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy)));
+        let hit = |(a, b): (i64, i64)| cell(a, b).is_some_and(|c| g[c]);
+        match all {
+            true => n.all(hit),
+            false => n.any(hit),
+        }
+    };
+    let dilated: Vec<bool> = (0..gw * gh)
+        .map(|c| around(&grid, lx + (c % gw) as i64, ly + (c / gw) as i64, false))
+        .collect();
+    members
+        .iter()
+        .copied()
+        .filter(|&i| {
+            let (x, y) = xy(i);
+            cell(x, y).is_some_and(|c| grid[c]) || around(&dilated, x, y, true)
+        })
+        .collect()
 }
 
 /// The median (the `n/2`-th smallest, as `select_nth_unstable`) and the largest of the
@@ -715,6 +779,33 @@ mod tests {
             }
         }
         out
+    }
+
+    #[test]
+    fn closing_fills_a_clipped_cores_holes_not_its_outline() {
+        // A 7 × 5 box; the set is a ring with a hole and a one-pixel gap; members cover it all.
+        let bw = 7;
+        let at = |x: usize, y: usize| y * bw + x;
+        let set = [
+            at(2, 1),
+            at(3, 1),
+            at(4, 1),
+            at(2, 2),
+            at(4, 2),
+            at(2, 3),
+            at(4, 3),
+        ];
+        let members: Vec<usize> = (0..bw * 5).collect();
+        let mut closed = close_within(&set, &members, bw);
+        closed.sort_unstable();
+        let mut want = set.to_vec();
+        want.extend([at(3, 2), at(3, 3)]);
+        want.sort_unstable();
+        assert_eq!(closed, want);
+        // Kept to the members: a filled pixel that is not a member stays out.
+        let members: Vec<usize> = members.into_iter().filter(|&i| i != at(3, 2)).collect();
+        assert!(!close_within(&set, &members, bw).contains(&at(3, 2)));
+        assert!(close_within(&[], &members, bw).is_empty());
     }
 
     #[test]
