@@ -452,6 +452,91 @@ def sweep_scenes():
     return scenes
 
 
+FRESH_SEED = 2211
+FRESH_BANDS = [(3.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, 45.0), (45.0, 90.0)]
+
+
+def fresh_scenes():
+    """A held-out set rendered after the detector was frozen (seed 2211, never used before):
+    6 scenes per elevation band (3–5, 5–10, 10–20, 20–45, 45–90°), azimuth, sky (clear, hazy,
+    intermediate, overcast), a cloud over the sun, clouds elsewhere, trees or buildings, lens
+    180°/190°, size, 2/3/5 frames and exposure all drawn from the seed. Every field is drawn in
+    the same order for every scene, so adding scenes never changes the earlier ones."""
+    rng = random.Random(FRESH_SEED)
+    scenes = []
+    per_band = 6
+    for b, (lo, hi) in enumerate(FRESH_BANDS):
+        for k in range(per_band):
+            i = b * per_band + k
+            el = rng.uniform(lo, hi)
+            az = rng.uniform(0, 360)
+            kind = rng.choices(["clear", "hazy", "intermediate", "overcast"], [0.35, 0.3, 0.2, 0.15])[0]
+            over_sun, elsewhere, obstacle = rng.random() < 0.2, rng.random() < 0.3, rng.random() < 0.35
+            clouds, obstacles = [], []
+            # Drawn whether used or not (the stream stays aligned).
+            r, off, t, bright = rng.uniform(4, 9), rng.uniform(0, 1), rng.uniform(0, 360), rng.uniform(3, 12)
+            if over_sun and kind != "overcast":
+                off *= r - 2
+                caz = az + off * math.sin(math.radians(t)) / max(math.cos(math.radians(el)), 0.2)
+                cel = min(el + off * math.cos(math.radians(t)), 89.0)
+                clouds.append(dict(az=caz, el=cel, radius=r, brightness=bright, rim=1.4))
+            others = [
+                dict(
+                    az=rng.uniform(0, 360),
+                    el=rng.uniform(8, 70),
+                    radius=rng.uniform(3, 10),
+                    brightness=rng.uniform(2, 8),
+                    rim=rng.uniform(1.1, 1.6),
+                )
+                for _ in range(3)
+            ]
+            n_others = rng.randint(1, 3)
+            if elsewhere:
+                clouds += [
+                    c
+                    for c in others[:n_others]
+                    if angle_between(vec(c["az"], c["el"]), vec(az, el)) > c["radius"] + 4
+                ]
+            okind = rng.choice(["trees", "buildings"])
+            height, centre_off, width = rng.uniform(4, 14), rng.uniform(-180, 180), rng.uniform(40, 140)
+            if obstacle:
+                centre = az + centre_off
+                obstacles.append(
+                    dict(kind=okind, seed=FRESH_SEED + i, height=height,
+                         **{"from": centre - width / 2, "to": centre + width / 2})
+                )
+            fov = rng.choice([180.0, 190.0])
+            size = rng.choice([256, 320, 384])
+            frames = rng.choice([2, 3, 3, 5])
+            ev = round(rng.uniform(-1.0, 1.5), 2)
+            dn, dh = illuminance(kind, el)
+            scenes.append(
+                dict(
+                    name=f"fresh{i:02d}",
+                    set="fresh",
+                    split="held-out",
+                    sun_request=[az, el],
+                    sky=kind,
+                    direct_normal_lux=dn,
+                    diffuse_horizontal_lux=dh,
+                    clouds=clouds,
+                    obstacles=obstacles,
+                    fov_deg=fov,
+                    size=size,
+                    camera=dict(ev_offset=ev, evs=FRAME_SETS[frames], seed=FRESH_SEED * 10 + i),
+                    time=None,
+                    latitude_deg=None,
+                    longitude_deg=None,
+                )
+            )
+    return scenes
+
+
+# The fresh scenes CI renders (256² or 320², every band, a cloud over the sun, trees), chosen by
+# what they are, not by how the detector did on them.
+CI_SCENES = ["fresh02", "fresh07", "fresh16", "fresh19", "fresh25", "fresh27"]
+
+
 def day_scenes():
     lat, lon = 47.05, 8.31
     tz = dt.timezone(dt.timedelta(hours=2))
@@ -523,13 +608,18 @@ def key_of(scene):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", required=True)
-    ap.add_argument("--set", choices=["sweep", "day", "issue", "all"], default="all")
+    ap.add_argument("--set", choices=["sweep", "fresh", "ci", "day", "issue", "all"], default="all")
     ap.add_argument("--split", choices=["tune", "held-out", "both"], default="both")
     ap.add_argument("--only", help="render only scenes whose name starts with this")
+    ap.add_argument("--describe", action="store_true", help="print the scenes, render nothing")
     args = ap.parse_args()
     scenes = []
     if args.set in ("sweep", "all"):
         scenes += sweep_scenes()
+    if args.set in ("fresh", "all"):
+        scenes += fresh_scenes()
+    if args.set == "ci":
+        scenes += [s for s in fresh_scenes() if s["name"] in CI_SCENES]
     if args.set in ("day", "all"):
         scenes += day_scenes()
     if args.set in ("issue", "all"):
@@ -538,6 +628,15 @@ def main():
         scenes = [s for s in scenes if s["split"] == args.split]
     if args.only:
         scenes = [s for s in scenes if s["name"].startswith(args.only)]
+    if args.describe:
+        for s in scenes:
+            hidden = "cloud-over-sun" if any(
+                angle_between(vec(c["az"], c["el"]), vec(*s["sun_request"])) < c["radius"] for c in s["clouds"]
+            ) else ""
+            print(f"{s['name']} el {s['sun_request'][1]:5.1f} az {s['sun_request'][0]:5.1f} {s['sky']:12s} "
+                  f"clouds {len(s['clouds'])} obstacles {len(s['obstacles'])} fov {s['fov_deg']:.0f} "
+                  f"size {s['size']} frames {len(s['camera']['evs'])} ev {s['camera']['ev_offset']:+} {hidden}")
+        return
     os.makedirs(args.out, exist_ok=True)
     written = []
     for s in scenes:

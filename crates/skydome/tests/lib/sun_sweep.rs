@@ -2,15 +2,24 @@
 //!
 //! `scripts/radiance_sweep.py` renders Perez skies (`gendaylit` + `rpict -vta`, from the
 //! `pyradiance` package, found through `SKYDOME_PYTHON`) into a cache under `target/`, keyed by
-//! their parameters: a sweep of 72 scenes (solar elevation 3–90° × azimuth × clear, hazy,
-//! intermediate and overcast skies × a bright cloud over the sun or elsewhere × trees or
-//! buildings on the horizon × exposure × 2, 3 or 5 frames × 180°/190° lenses) split by a fixed
-//! seed into a **tune** half (the scenes the detector was tuned on) and a **held-out** half
-//! (never looked at while tuning); one station's day (one capture an hour, some suns behind
-//! clouds, time and site known as EXIF gives them); and the issue's own case. Each scene is
-//! photographed here by the project's camera simulation ([`synth::photograph`]: a lens losing
-//! half its light at the horizon, shot and read noise, an 8-bit response, JPEG) and merged by
-//! [`pipeline::run`] with the sun found automatically.
+//! their parameters (solar elevation 3–90° × azimuth × clear, hazy, intermediate and overcast
+//! skies × a bright cloud over the sun or elsewhere × trees or buildings on the horizon ×
+//! exposure × 2, 3 or 5 frames × 180°/190° lenses):
+//! - `sweep`: 72 scenes split by seed 22 into a tune and a first held-out half; the detector was
+//!   tuned on the first and the second was looked at while tuning, so neither is held out now
+//!   (`SKYDOME_SUN_SWEEP=all` scores them);
+//! - `fresh`: 30 scenes from seed 2211, 6 per elevation band, rendered after the detector was
+//!   frozen and measured on it untouched — the **held-out** set whose numbers `docs/station.md`
+//!   gives and [`held_out_suns_are_found_and_no_false_one`] holds; CI scores its six-scene `ci`
+//!   part (chosen by what the scenes show, before any was scored), `SKYDOME_SUN_SWEEP=fresh`
+//!   all 30;
+//! - `day`: one station's day (one capture an hour, some suns behind clouds, time and site as
+//!   EXIF gives them), `SKYDOME_SUN_SWEEP=day` or `all`;
+//! - `issue`: the issue's own case, always.
+//!
+//! Each scene is photographed here by the project's camera simulation ([`synth::photograph`]: a
+//! lens losing half its light at the horizon, shot and read noise, an 8-bit response, JPEG) and
+//! merged by [`pipeline::run`] with the sun found automatically.
 //!
 //! Scored per scene: a visible sun (not behind a cloud or an obstacle, direct normal > 0) must be
 //! found, and its angular error is measured; a sun reported where none is visible, or more than
@@ -18,8 +27,7 @@
 //! illuminance of the render as meter readings, the reconstructed direct normal and diffuse
 //! horizontal illuminance are compared with gendaylit's inputs.
 //!
-//! `SKYDOME_SUN_SWEEP=all` scores both halves (the benchmark, `scripts/sun_sweep.sh`); the
-//! default scores the held-out half, which is what the assertions hold to.
+//! CI renders 7 scenes (about a minute and a half on 2 cores); the cache makes reruns free.
 
 use crate::common;
 use std::path::{Path, PathBuf};
@@ -32,6 +40,24 @@ use skydome::photometry::{Reference, SpotLuminance};
 use skydome::pipeline::{self, Frames, Input, LensSource, Options, SkyOptions, SunDisc, SunMode};
 use skydome::sky::{radiance_luminance, DevicePose, Direction, ImageOrientation, SkyGeometry};
 use skydome::synth::{self, SynthOptions};
+
+/// The share of visible suns of the fresh held-out set the detector must find: measured 20 of
+/// 20 (see `docs/station.md`), held with a margin of one sun in 20.
+const FRESH_FOUND_MIN: f64 = 0.95;
+
+/// The largest angular error (degrees) allowed on the fresh held-out set: the issue's 0.5°
+/// target (measured: 0.23°).
+const FRESH_ERROR_MAX_DEG: f64 = 0.5;
+
+/// The largest |direct normal error| of a rebuilt (clipped) sun on the fresh held-out set:
+/// measured 30.8 % (a hazy sun 3.7° up), held at 35 %.
+const FRESH_DIRECT_MAX: f64 = 0.35;
+
+/// The false sun measured on the fresh held-out set, an open failure of the detector (not
+/// tuned away, so the set stays held out): `fresh23`, a clear sky whose sun hides behind a
+/// bright cloud (10× the diffuse sky's luminance, 2 frames), where one pixel of the cloud clips
+/// even in the shorter frame and passes for a clipped core. Any other false sun fails.
+const FRESH_KNOWN_FALSE_SUNS: &[&str] = &["fresh23"];
 
 /// A rendered scene and what it was made of (`truth.json`).
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -434,49 +460,91 @@ fn low_sun_with_a_large_clipped_aureole_is_found() {
     assert!(dn.abs() < 0.10, "direct normal off by {:.1} %", 100.0 * dn);
 }
 
-/// The sweep: on the held-out half, no false sun and every sun found within 0.5° (the rate of
-/// visible suns found is held where this round left it; see [`hold_to_targets`]).
-#[test]
-fn sweep_finds_every_visible_sun_and_no_false_one() {
-    let split = match std::env::var("SKYDOME_SUN_SWEEP").as_deref() {
-        Ok("all") => "both",
-        Ok("tune") => "tune",
-        _ => "held-out",
-    };
-    let Some(scenes) = scenes("sweep", split) else {
-        return;
-    };
-    let scores: Vec<Score> = scenes
+/// Which sets the sweep tests render and score (`SKYDOME_SUN_SWEEP`): unset (CI), the small
+/// `ci` part of the fresh held-out set; `fresh`, all of it; `day`, the station's day; `all`,
+/// everything (the benchmark, `scripts/sun_sweep.sh`).
+fn sweep_env() -> String {
+    std::env::var("SKYDOME_SUN_SWEEP").unwrap_or_default()
+}
+
+fn score_all(scenes: &[Scene]) -> Vec<Score> {
+    scenes
         .iter()
         .map(|s| {
             let sc = score(s);
             print_scene(&sc, &s.truth);
             sc
         })
-        .collect();
-    for half in ["tune", "held-out"] {
-        let part: Vec<Score> = scores.iter().filter(|s| s.split == half).cloned().collect();
-        if !part.is_empty() {
-            table(half, &part);
-        }
-    }
-    let held: Vec<Score> = scores
-        .iter()
-        .filter(|s| s.split == "held-out")
-        .cloned()
-        .collect();
-    hold_to_targets("held-out", &held, 0.85);
+        .collect()
 }
 
-/// No false sun, every found sun within 0.5°, and at least `min_found` of the visible suns
-/// found. The issue's target is all of them; this round finds every visible sun of the tune
-/// half and of the day, and 23 of the 26 of the held-out half (three hazy suns about 3° up,
-/// unclipped and only ~15× the median, are missed), so the held-out rate is held at 85 % and
-/// the target is still open there.
-fn hold_to_targets(label: &str, scores: &[Score], min_found: f64) {
+/// The first sweep (seed 22 split into a tune and a held-out half; the held-out half was looked
+/// at while the detector was tuned, so it is no longer held out): scored with
+/// `SKYDOME_SUN_SWEEP=all` only, held where the tuning left it.
+#[test]
+fn tuning_sweep_finds_the_suns_it_was_tuned_on() {
+    if sweep_env() != "all" {
+        eprintln!(
+            "skipping tuning_sweep_finds_the_suns_it_was_tuned_on: set SKYDOME_SUN_SWEEP=all"
+        );
+        return;
+    }
+    let Some(scenes) = scenes("sweep", "both") else {
+        return;
+    };
+    let scores = score_all(&scenes);
+    for half in ["tune", "held-out"] {
+        let part: Vec<Score> = scores.iter().filter(|s| s.split == half).cloned().collect();
+        table(half, &part);
+    }
+    hold_to_targets("sweep (tune + first held-out)", &scores, 0.9, 0.5);
+}
+
+/// The fresh held-out set (seed 2211, rendered after the detector was frozen and measured on
+/// it untouched; `docs/station.md` has the table): no false sun, every visible sun found within
+/// the measured largest error plus a margin, and the measured share of visible suns found. CI
+/// renders its `ci` part (six scenes chosen by what they show); `SKYDOME_SUN_SWEEP=fresh` or
+/// `all` scores all 30.
+#[test]
+fn held_out_suns_are_found_and_no_false_one() {
+    let set = match sweep_env().as_str() {
+        "fresh" | "all" => "fresh",
+        _ => "ci",
+    };
+    let Some(scenes) = scenes(set, "both") else {
+        return;
+    };
+    let scores = score_all(&scenes);
+    table(&format!("fresh ({set})"), &scores);
+    hold_to_targets(
+        &format!("fresh ({set})"),
+        &scores,
+        FRESH_FOUND_MIN,
+        FRESH_ERROR_MAX_DEG,
+    );
+}
+
+/// No false sun, every found sun within `max_error_deg`, and at least `min_found` of the
+/// visible suns found.
+fn hold_to_targets(label: &str, scores: &[Score], min_found: f64, max_error_deg: f64) {
+    hold_to_targets_except(label, scores, min_found, max_error_deg, &[]);
+}
+
+/// [`hold_to_targets`], with the false suns of the scenes named in `known_false` (measured and
+/// documented failures) printed but not failed.
+fn hold_to_targets_except(
+    label: &str,
+    scores: &[Score],
+    min_found: f64,
+    max_error_deg: f64,
+    known_false: &[&str],
+) {
+    for s in scores.iter().filter(|s| s.false_sun()) {
+        eprintln!("{label}: false sun in {} ({:?}° off)", s.name, s.error_deg);
+    }
     let false_suns: Vec<&str> = scores
         .iter()
-        .filter(|s| s.false_sun())
+        .filter(|s| s.false_sun() && !known_false.contains(&s.name.as_str()))
         .map(|s| s.name.as_str())
         .collect();
     assert!(
@@ -485,12 +553,12 @@ fn hold_to_targets(label: &str, scores: &[Score], min_found: f64) {
     );
     let far: Vec<String> = scores
         .iter()
-        .filter(|s| s.visible && s.error_deg.is_some_and(|e| e > 0.5))
+        .filter(|s| s.visible && s.error_deg.is_some_and(|e| e > max_error_deg))
         .map(|s| format!("{} (el {:.1}, {:?}°)", s.name, s.elevation, s.error_deg))
         .collect();
     assert!(
         far.is_empty(),
-        "{label}: suns found more than 0.5° off: {far:?}"
+        "{label}: suns found more than {max_error_deg}° off: {far:?}"
     );
     let visible = scores.iter().filter(|s| s.visible).count();
     let found = scores
@@ -513,17 +581,16 @@ fn hold_to_targets(label: &str, scores: &[Score], min_found: f64) {
 /// found within 0.5° wherever it is visible and never where a cloud or the trees hide it.
 #[test]
 fn a_stations_day_finds_the_sun_wherever_visible() {
+    if !matches!(sweep_env().as_str(), "day" | "all") {
+        eprintln!(
+            "skipping a_stations_day_finds_the_sun_wherever_visible: set SKYDOME_SUN_SWEEP=day or all (16 renders, too slow for CI)"
+        );
+        return;
+    }
     let Some(scenes) = scenes("day", "both") else {
         return;
     };
-    let scores: Vec<Score> = scenes
-        .iter()
-        .map(|s| {
-            let sc = score(s);
-            print_scene(&sc, &s.truth);
-            sc
-        })
-        .collect();
+    let scores = score_all(&scenes);
     table("day", &scores);
-    hold_to_targets("day", &scores, 1.0);
+    hold_to_targets("day", &scores, 1.0, 0.5);
 }
