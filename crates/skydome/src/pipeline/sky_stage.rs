@@ -6,11 +6,10 @@
 use std::borrow::Cow;
 
 use serde::Serialize;
-use time::OffsetDateTime;
 
 use super::progress::{Reporter, Stage};
 use super::{default_equirect_width, EquirectOptions, Options, PipelineError, SunDisc, SunMode};
-use crate::bracket::{self, Bracket};
+use crate::bracket::Bracket;
 use crate::fisheye::{self, CircleFit, LensKind, LensProfile};
 use crate::formats::{HdrMeta, SunMark};
 use crate::image::{fmt_num, radiance_luminance, Circle, HdrImage, PixelPoint};
@@ -709,24 +708,12 @@ fn level_dome(
     })
 }
 
-/// The capture time: the given one, else EXIF's.
-fn capture_time(o: &Options, br: &Bracket) -> Result<Option<OffsetDateTime>, PipelineError> {
-    match &o.sky.time {
-        Some(t) => bracket::parse_iso8601(t)
-            .map(Some)
-            .ok_or_else(|| PipelineError::BadTime(t.clone())),
-        None => Ok(br.info.capture_time()),
-    }
-}
-
 /// The computed sun direction when time and place are known (given values win over EXIF);
 /// an error only when the ephemeris sun was asked for and cannot be computed.
 fn ephemeris(o: &Options, br: &Bracket) -> Result<Option<Direction>, PipelineError> {
-    let time = capture_time(o, br)?;
-    let lat = o.sky.latitude_deg.or(br.info.gps_latitude_deg);
-    let lon = o.sky.longitude_deg.or(br.info.gps_longitude_deg);
-    let dir = match (time, lat, lon) {
-        (Some(t), Some(lat), Some(lon)) => Some(sky::sun_ephemeris(
+    let c = super::capture::resolve(o, br)?;
+    let dir = match (c.time, c.site) {
+        (Some(t), Some((lat, lon))) => Some(sky::sun_ephemeris(
             t,
             &Site {
                 latitude_deg: lat,

@@ -11,6 +11,7 @@ mod fisheye_support;
 mod align;
 mod bracket_real;
 mod calibration;
+mod capture;
 mod curve_range;
 mod exif_stations;
 mod fisheye;
