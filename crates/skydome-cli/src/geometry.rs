@@ -250,6 +250,7 @@ impl GeometryArgs {
                 SunMode::None
             },
             time: self.time.clone(),
+            time_zone: None,
             latitude_deg: self.lat,
             longitude_deg: self.lon,
             sun_disc: self.sun_disc,

@@ -8,7 +8,7 @@ use skydome::camera::CameraProfile;
 use skydome::image::PixelPoint;
 use skydome::merge::Weighting;
 use skydome::photometry::{Reference, SpotLuminance};
-use skydome::pipeline::{self, Dome, Options, Products, Report, ResponseSource};
+use skydome::pipeline::{self, Dome, Options, Products, Report, ResponseSource, SkyOptions};
 
 use crate::calibrate::CalibArgs;
 use crate::geometry::{GeometryArgs, MapOutputs};
@@ -52,6 +52,10 @@ pub struct Args {
     /// Radius in pixels of the patch --luminance averages.
     #[arg(long, default_value_t = 3.0, value_name = "PX")]
     pub luminance_radius: f64,
+    /// The UTC offset (+02:00, -05:00, Z) the camera's clock (EXIF DateTimeOriginal) is read
+    /// in, for cameras that write no OffsetTimeOriginal; it overrides EXIF's offset.
+    #[arg(long, value_name = "OFFSET", allow_hyphen_values = true)]
+    pub time_zone: Option<String>,
     /// Horizontal illuminance in lux measured beside the camera: makes the radiance absolute
     /// (with --luminance too, the disagreement is reported). Needs a fish-eye lens.
     #[arg(long, value_name = "LUX")]
@@ -165,7 +169,10 @@ fn options(a: &Args) -> Result<Options> {
         consistency: a.consistency.is_some(),
         ghosts: a.ghosts,
         lens: a.geometry.lens_source(a.calib.circle)?,
-        sky: a.geometry.sky(),
+        sky: SkyOptions {
+            time_zone: a.time_zone.clone(),
+            ..a.geometry.sky()
+        },
         products: a.geometry.products(
             Products {
                 preview: a.preview.is_some(),
@@ -251,6 +258,19 @@ fn print_summary(r: &Report, written: &[String]) {
         r.height,
         r.response
     ));
+    let c = &r.capture;
+    if c.time_utc.is_some() || c.latitude_deg.is_some() {
+        crate::out(&format!(
+            "time {} (from {}), site {} (from {})",
+            c.time_utc.as_deref().unwrap_or("unknown"),
+            c.time_from.name(),
+            match (c.latitude_deg, c.longitude_deg) {
+                (Some(la), Some(lo)) => format!("{la:.5}° N {lo:.5}° E"),
+                _ => "unknown".into(),
+            },
+            c.site_from.name()
+        ));
+    }
     if let Some(g) = &r.geometry {
         crate::out(&format!(
             "lens {} {:.0}°, circle ({:.1}, {:.1}) r {:.1} px; horizon r {:.1} px in the output",

@@ -22,6 +22,7 @@
 //!
 //! See the crate documentation for a complete example.
 
+mod capture;
 mod options;
 mod progress;
 mod report;
@@ -47,6 +48,7 @@ use crate::sky::SkyError;
 use crate::sun_disc::DirectSource;
 use crate::tonemap::{self, ToneMap, TonemapError};
 
+pub use capture::{CaptureReport, Provenance};
 pub use options::{
     default_equirect_width, EncodedFrame, EquirectOptions, Frames, Input, LensSource, Options,
     Products, ResponseSource, SkyOptions, SunDisc, SunMode,
@@ -88,6 +90,9 @@ pub enum PipelineError {
         "capture time '{0}': expected ISO 8601 with a UTC offset, e.g. 2026-06-21T12:30:00+02:00"
     )]
     BadTime(String),
+    /// The time zone could not be read.
+    #[error("time zone '{0}': expected a UTC offset such as +02:00, -05:00 or Z")]
+    BadTimeZone(String),
     /// The ephemeris sun was asked for without a time or place.
     #[error("the sun from the ephemeris needs the capture time (EXIF or given) and the place (EXIF GPS or given latitude and longitude)")]
     NoEphemeris,
@@ -162,7 +167,8 @@ pub fn run(
         photometry,
         sky,
     } = sky_stage::run(options, &br, lens, merged_radiance, clipped, &mut progress)?;
-    let meta = dome_meta(&br, photometry.as_ref(), sky.as_ref());
+    let capture = capture::resolve(options, &br)?;
+    let meta = dome_meta(&capture, photometry.as_ref(), sky.as_ref());
     let marks = sky.as_ref().map(|s| s.marks);
     let pictures = pictures_stage(
         options,
@@ -218,6 +224,7 @@ pub fn run(
         meta: meta.clone(),
         geometry,
         photometry,
+        capture: capture.report,
         warnings,
     };
     // The profile made by calibrating carries the noise model the merge fitted.
@@ -454,16 +461,17 @@ fn merge_stage(
 /// absolute dome; and from the sky stage the line of a reconstructed sun, the sun, north and
 /// `VIEW=`.
 fn dome_meta(
-    br: &Bracket,
+    capture: &capture::Capture,
     photometry: Option<&PhotometryReport>,
     sky: Option<&SkyResult>,
 ) -> HdrMeta {
-    let (capdate, gmt) = br.info.header_times();
+    let (capdate, gmt) = capture.header_times();
     let mut meta = HdrMeta {
         capdate,
         gmt,
         ..HdrMeta::default()
     };
+    meta.other.extend(capture.site_line());
     if let Some(p) = photometry {
         meta.other.push(absolute_header_line(p));
     }

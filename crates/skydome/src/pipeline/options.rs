@@ -132,6 +132,9 @@ pub struct SkyOptions {
     pub sun: SunMode,
     /// Capture time, ISO 8601 with a UTC offset; default: EXIF `DateTimeOriginal` + offset.
     pub time: Option<String>,
+    /// The UTC offset (`+02:00`, `-05:00`, `Z`) EXIF's `DateTimeOriginal` is read in, for
+    /// cameras that write no `OffsetTimeOriginal`; when given it wins over EXIF's offset.
+    pub time_zone: Option<String>,
     /// Latitude in degrees, north positive; default: EXIF GPS.
     pub latitude_deg: Option<f64>,
     /// Longitude in degrees, east positive; default: EXIF GPS.
@@ -166,6 +169,7 @@ impl Default for SkyOptions {
             level: None,
             sun: SunMode::Auto,
             time: None,
+            time_zone: None,
             latitude_deg: None,
             longitude_deg: None,
             sun_disc: SunDisc::Reconstruct,

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::GeometryReport;
+use super::{CaptureReport, GeometryReport};
 use crate::align::Alignment;
 use crate::bracket::{Frame, RawColour};
 use crate::camera::CameraProfile;
@@ -67,6 +67,8 @@ pub struct Report {
     pub geometry: Option<GeometryReport>,
     /// The absolute calibration, when a measurement was given.
     pub photometry: Option<PhotometryReport>,
+    /// When and where the bracket was taken, and where each came from.
+    pub capture: CaptureReport,
     /// Warnings, in neutral words, one sentence each.
     pub warnings: Vec<String>,
 }

@@ -6,11 +6,10 @@
 use std::borrow::Cow;
 
 use serde::Serialize;
-use time::OffsetDateTime;
 
 use super::progress::{Reporter, Stage};
 use super::{default_equirect_width, EquirectOptions, Options, PipelineError, SunDisc, SunMode};
-use crate::bracket::{self, Bracket};
+use crate::bracket::Bracket;
 use crate::fisheye::{self, CircleFit, LensKind, LensProfile};
 use crate::formats::{HdrMeta, SunMark};
 use crate::image::{fmt_num, radiance_luminance, Circle, HdrImage, PixelPoint};
@@ -288,8 +287,9 @@ fn apply(
     };
     let horizon = f.geom.horizon_circle();
     let north = s.north_deg.map(|_| f.geom.north_point());
-    let sun = locate_sun(o, br, &f, &horizon)?;
+    let sun = locate_sun(o, br, &f, &horizon, clipped)?;
     let mut warnings: Vec<String> = sun.disagreement_warning().into_iter().collect();
+    warnings.extend(sun.missing_warning(&f));
     let disc = match (s.sun_disc, &sun.direction, clipped) {
         (SunDisc::Reconstruct, Some(d), Some(mask)) => {
             let mask = (mask, br.width(), br.height());
@@ -414,6 +414,24 @@ impl SunFound {
         ))
     }
 
+    /// The warning when time and site put the sun above the horizon, no sun was observed, and
+    /// the sky around the computed sun is bright (at least [`CLEAR_AROUND_SUN_RATIO`] times
+    /// the dome's median luminance within 10° of it, as around a sun in a clear sky): a sun
+    /// should have been seen there. An overcast sky is dull there and gets no warning.
+    fn missing_warning(&self, f: &Framed) -> Option<String> {
+        let e = self.ephemeris.filter(|e| e.elevation_deg > 0.5)?;
+        if self.pixel.is_some() || self.source.is_some() {
+            return None;
+        }
+        let ratio = brightness_around(f, &e, 10.0)?;
+        (ratio >= CLEAR_AROUND_SUN_RATIO).then(|| {
+            format!(
+                "time and site put the sun at azimuth {:.1}°, elevation {:.1}°, and the sky there is {:.0}× the dome's median, but no sun was found: a cloud or an obstacle hides it, or the time, site, north or lens is wrong",
+                e.azimuth_deg, e.elevation_deg, ratio
+            )
+        })
+    }
+
     /// The sun as marked in the header: an azimuth means something only when north is known,
     /// or the position came from it (the ephemeris).
     fn mark(&self, north_known: bool) -> Option<SunMark> {
@@ -436,9 +454,19 @@ fn locate_sun(
     br: &Bracket,
     f: &Framed,
     horizon: &Circle,
+    clipped: Option<&[u8]>,
 ) -> Result<SunFound, PipelineError> {
     let ephemeris = ephemeris(o, br)?;
-    let (pixel, source, confidence) = find_sun(o.sky.sun, f, horizon, ephemeris.as_ref());
+    // The ephemeris guides the search only where azimuths mean something (north known).
+    let prior = ephemeris
+        .filter(|_| o.sky.north_deg.is_some())
+        .map(|d| (d, SUN_PRIOR_RADIUS_DEG));
+    let mask = clipped.map(|m| framed_mask(f, m, br.width(), br.height()));
+    let clues = sky::SunClues {
+        clipped: mask.as_deref(),
+        prior,
+    };
+    let (pixel, source, confidence) = find_sun(o.sky.sun, f, horizon, ephemeris.as_ref(), &clues)?;
     let direction = pixel.and_then(|p| f.geom.pixel_to_direction(p));
     let cross_check = match (source, &direction, &ephemeris) {
         (Some(SunSource::Detected | SunSource::Tap), Some(d), Some(e)) => {
@@ -454,6 +482,40 @@ fn locate_sun(
         ephemeris,
         cross_check,
     })
+}
+
+/// The sky within 10° of a sun this many times brighter than the dome's median counts as clear
+/// around the sun (Perez clear skies: 5–30×; overcast: 1–2×).
+pub const CLEAR_AROUND_SUN_RATIO: f64 = 3.0;
+
+/// Mean luminance within `radius_deg` of `d` over the dome's median luminance (`None` when the
+/// dome or the cap is empty).
+fn brightness_around(f: &Framed, d: &Direction, radius_deg: f64) -> Option<f64> {
+    let sun = d.to_vector();
+    let cos_r = radius_deg.to_radians().cos();
+    let (mut all, mut near) = (Vec::new(), (0.0f64, 0usize));
+    for y in 0..f.image.height {
+        for x in 0..f.image.width {
+            let Some(v) = f.geom.pixel_to_vector(x as f64 + 0.5, y as f64 + 0.5) else {
+                continue;
+            };
+            if v[2] < 0.0 {
+                continue;
+            }
+            let l = radiance_luminance(f.image.pixel(x, y).map(f64::from));
+            all.push(l);
+            if v[0] * sun[0] + v[1] * sun[1] + v[2] * sun[2] >= cos_r {
+                near.0 += l;
+                near.1 += 1;
+            }
+        }
+    }
+    if all.is_empty() || near.1 == 0 {
+        return None;
+    }
+    let mid = all.len() / 2;
+    let median = *all.select_nth_unstable_by(mid, f64::total_cmp).1;
+    (median > 0.0).then(|| near.0 / near.1 as f64 / median)
 }
 
 /// The equirectangular map of the framed dome.
@@ -646,24 +708,12 @@ fn level_dome(
     })
 }
 
-/// The capture time: the given one, else EXIF's.
-fn capture_time(o: &Options, br: &Bracket) -> Result<Option<OffsetDateTime>, PipelineError> {
-    match &o.sky.time {
-        Some(t) => bracket::parse_iso8601(t)
-            .map(Some)
-            .ok_or_else(|| PipelineError::BadTime(t.clone())),
-        None => Ok(br.info.capture_time()),
-    }
-}
-
 /// The computed sun direction when time and place are known (given values win over EXIF);
 /// an error only when the ephemeris sun was asked for and cannot be computed.
 fn ephemeris(o: &Options, br: &Bracket) -> Result<Option<Direction>, PipelineError> {
-    let time = capture_time(o, br)?;
-    let lat = o.sky.latitude_deg.or(br.info.gps_latitude_deg);
-    let lon = o.sky.longitude_deg.or(br.info.gps_longitude_deg);
-    let dir = match (time, lat, lon) {
-        (Some(t), Some(lat), Some(lon)) => Some(sky::sun_ephemeris(
+    let c = super::capture::resolve(o, br)?;
+    let dir = match (c.time, c.site) {
+        (Some(t), Some((lat, lon))) => Some(sky::sun_ephemeris(
             t,
             &Site {
                 latitude_deg: lat,
@@ -687,8 +737,9 @@ fn find_sun(
     f: &Framed,
     horizon: &Circle,
     ephemeris: Option<&Direction>,
-) -> (Option<PixelPoint>, Option<SunSource>, Option<f64>) {
-    match mode {
+    clues: &sky::SunClues<'_>,
+) -> Result<FoundSun, PipelineError> {
+    Ok(match mode {
         SunMode::None => (None, None, None),
         SunMode::Tap(p) => (f.shift(p), Some(SunSource::Tap), None),
         SunMode::Ephemeris => (
@@ -696,11 +747,49 @@ fn find_sun(
             Some(SunSource::Ephemeris),
             None,
         ),
-        SunMode::Auto => match sky::detect_sun(&f.image, horizon) {
-            Some(d) => (Some(d.pixel), Some(SunSource::Detected), Some(d.confidence)),
-            None => (None, None, None),
-        },
+        SunMode::Auto => {
+            let found = match clues.clipped {
+                Some(_) => sky::find_sun(&f.image, &f.geom, clues)?,
+                // Without the merge's clipping flags, the blob above half the peak.
+                None => sky::detect_sun(&f.image, horizon),
+            };
+            match found {
+                Some(d) => (Some(d.pixel), Some(SunSource::Detected), Some(d.confidence)),
+                None => (None, None, None),
+            }
+        }
+    })
+}
+
+/// The sun in output pixels, how it was found, and the detection's confidence.
+type FoundSun = (Option<PixelPoint>, Option<SunSource>, Option<f64>);
+
+/// How far from the ephemeris sun (degrees) a detection is still taken for it: a phone's
+/// compass near a clip-on lens's magnet errs by up to ~10°, a lens model by a degree or two.
+pub const SUN_PRIOR_RADIUS_DEG: f64 = 12.0;
+
+/// The merge's clipped-in-every-frame flags (`mask`, per input pixel, `width × height`) on the
+/// framed dome's pixels.
+fn framed_mask(f: &Framed, mask: &[u8], width: usize, height: usize) -> Vec<bool> {
+    let (w, h) = (f.image.width, f.image.height);
+    let mut out = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let p = PixelPoint {
+                x: x as f64 + 0.5,
+                y: y as f64 + 0.5,
+            };
+            let Some(q) = f.unshift(p) else { continue };
+            if q.x < 0.0 || q.y < 0.0 {
+                continue;
+            }
+            let (ix, iy) = (q.x as usize, q.y as usize);
+            if ix < width && iy < height {
+                out[y * w + x] = mask[iy * width + ix] & crate::merge::CLIPPED_HIGH != 0;
+            }
+        }
     }
+    out
 }
 
 /// The upward 180° dome as Radiance's angular fish-eye (`-vta`), whatever the lens's own

@@ -59,7 +59,10 @@ pub use ephemeris::{cross_check, sun_ephemeris, Refraction, Site, SunCrossCheck}
 // Radiance's luminance formula lives beside the pixels; re-exported where the sky's users look.
 pub use crate::image::{radiance_luminance, RADIANCE_EFFICACY};
 pub use geometry::{DevicePose, ImageOrientation, Level, SkyGeometry};
-pub use sun::{detect_sun, detect_sun_luma, detect_sun_u8, SunDetection};
+pub use sun::{
+    detect_sun, detect_sun_luma, detect_sun_u8, find_sun, SunClues, SunDetection, SUN_BRIGHT_RATIO,
+    SUN_CORE_MAX_DEG,
+};
 
 use serde::{Deserialize, Serialize};
 

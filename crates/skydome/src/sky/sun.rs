@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::SkyError;
+use super::{Direction, SkyError, SkyGeometry};
 use crate::image::PixelPoint;
 use crate::image::{luminance, Circle, HdrImage, RgbImage};
 
@@ -211,6 +211,371 @@ impl Blob<'_> {
     }
 }
 
+/// What the search for the sun in a dome knows besides its pixels ([`find_sun`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SunClues<'a> {
+    /// Per pixel of the image (row-major, its size): `true` where the pixel clipped even in the
+    /// shortest exposure (the merge's `CLIPPED_HIGH`), so its radiance is a lower bound.
+    pub clipped: Option<&'a [bool]>,
+    /// Where time and site put the sun (the ephemeris) and how far from it, in degrees, a
+    /// detection is still taken for it (the compass's and the lens model's errors): a sun-like
+    /// blob within it wins over any other.
+    pub prior: Option<(Direction, f64)>,
+}
+
+/// Clipped cores larger than this (equivalent angular radius, degrees) are no sun: the disc is
+/// 0.53° across, and glare in a clipped frame grows it by a few pixels, not by degrees.
+pub const SUN_CORE_MAX_DEG: f64 = 4.5;
+
+/// A blob brighter than this many times the dome's median is sun-bright even where nothing
+/// clipped (the sun is ~10⁵ times the sky; a lit cloud is at most some tens of times).
+pub const SUN_BRIGHT_RATIO: f64 = 300.0;
+
+/// Finds the sun in a dome `img` seen through `geom` (the search covers the horizon circle,
+/// `θ ≤ 90°`), with what else is known (`clues`). Unlike [`detect_sun`], which judges the blob
+/// above half the peak, it judges each bright blob by its **core** — the pixels that clipped in
+/// every frame, or within 10 % of the blob's maximum where none clipped — so a circumsolar
+/// aureole clipping thousands of pixels of the longer frames does not hide the sun, and a lit
+/// cloud does not pass for one:
+///
+/// - a sun is **sun-bright**: its core clipped even in the shortest exposure, or it is
+///   [`SUN_BRIGHT_RATIO`] times the median; a cloud that did not clip in the shortest frame is
+///   never the sun;
+/// - its core is **small** (equivalent angular radius, from the projection's solid angle per
+///   pixel, at most [`SUN_CORE_MAX_DEG`]) and **compact** (at least 30 % of the disc around its
+///   centroid that holds it, measured in angle, so a low sun flattened by the projection counts
+///   as round): a clipped cloud is large or ragged;
+/// - with a prior (time and site known), a blob within its radius wins, the nearest first.
+///
+/// The sun's centre is the centroid of its core. Confidence = compactness × contrast
+/// (`log10(peak/median)/2`, capped at 1) × size (1 up to a core of 1°, falling to 0 at
+/// [`SUN_CORE_MAX_DEG`]) × ambiguity (`1 −` the runner-up's score over the winner's); below
+/// 0.15, or with no sun-like blob, `None`.
+pub fn find_sun(
+    img: &HdrImage,
+    geom: &SkyGeometry,
+    clues: &SunClues<'_>,
+) -> Result<Option<SunDetection>, SkyError> {
+    let (width, height) = (img.width, img.height);
+    if let Some(c) = clues.clipped {
+        crate::image::check_samples(c.len(), width, height, 1)?;
+    }
+    let region = geom.horizon_circle();
+    if !(region.r.is_finite() && region.r > 0.0) {
+        return Ok(None);
+    }
+    let luma: Vec<f32> = img.pixels().map(luminance).collect();
+    let x0 = (region.cx - region.r).floor().max(0.0) as usize;
+    let y0 = (region.cy - region.r).floor().max(0.0) as usize;
+    let x1 = ((region.cx + region.r).ceil().max(0.0) as usize).min(width);
+    let y1 = ((region.cy + region.r).ceil().max(0.0) as usize).min(height);
+    if x1 <= x0 || y1 <= y0 {
+        return Ok(None);
+    }
+    let (bw, bh) = (x1 - x0, y1 - y0);
+    let b = ((region.r / 150.0).round() as usize).max(1);
+    let blurred = region_box_mean(&luma, width, (x0, y0, bw, bh), &region, b);
+    let Some((background, _)) = median_and_peak(&blurred) else {
+        return Ok(None);
+    };
+    let at = |i: usize| (y0 + i / bw) * width + x0 + i % bw;
+    let raw = |i: usize| {
+        let v = luma[at(i)];
+        if v.is_finite() {
+            v.max(0.0)
+        } else {
+            0.0
+        }
+    };
+    let clipped = |i: usize| clues.clipped.is_some_and(|c| c[at(i)]);
+    // The search map: blurred (against noise), but a clipped pixel keeps its own value (a
+    // clipped core of a pixel or two would otherwise be blurred into its aureole).
+    let map: Vec<f32> = (0..bw * bh)
+        .map(|i| match blurred[i].is_nan() {
+            true => f32::NAN,
+            false if clipped(i) => raw(i),
+            false => blurred[i],
+        })
+        .collect();
+    let peak = map
+        .iter()
+        .copied()
+        .filter(|v| !v.is_nan())
+        .fold(0.0f32, f32::max);
+    let bg = background.max(peak * 1e-9).max(f32::MIN_POSITIVE);
+    if !(peak > 0.0 && f64::from(peak / bg) >= 2.0) {
+        return Ok(None);
+    }
+    let t = background + 0.5 * (peak - background);
+    let mut blobs = blobs_above(&map, bw, bh, t, peak - background);
+    blobs.sort_by(|a, b| b.0.total_cmp(&a.0));
+    blobs.truncate(16);
+    // Solid angle of the pixel at box index i (sr): sin θ / (r'(θ) · r(θ)) per px².
+    let proj = geom.projection();
+    let (cx, cy) = geom.centre();
+    let solid_angle = |x: f64, y: f64| -> f64 {
+        let r = (x - cx).hypot(y - cy).max(0.5);
+        match proj.theta(r) {
+            Some(th) => th.sin() / (proj.derivative(th) * r),
+            None => 0.0,
+        }
+    };
+    struct Candidate {
+        x: f64,
+        y: f64,
+        score: f64,
+        compactness: f64,
+        core_deg: f64,
+        contrast: f64,
+        area: usize,
+        ratio: f64,
+        off_prior: Option<f64>,
+    }
+    let mut candidates = Vec::new();
+    for (_, members) in &blobs {
+        let m = members.iter().map(|&i| raw(i)).fold(0.0f32, f32::max);
+        let any_clipped = members.iter().any(|&i| clipped(i));
+        let core: Vec<usize> = match any_clipped {
+            // Closed (3 × 3): a JPEG's ringing leaves a clipped core with unflagged holes and
+            // gaps (a pixel reading 253 in the shortest frame), which would make a round sun
+            // look ragged.
+            true => close_within(
+                &members
+                    .iter()
+                    .copied()
+                    .filter(|&i| clipped(i))
+                    .collect::<Vec<_>>(),
+                members,
+                bw,
+            ),
+            false => members
+                .iter()
+                .copied()
+                .filter(|&i| raw(i) >= 0.9 * m)
+                .collect(),
+        };
+        let ratio = f64::from(m / bg);
+        // At the dome's ceiling: the brightest thing in it, ten times the median (a pixel JPEG
+        // pulled down to 253 in the shortest frame is clipped but not flagged).
+        let at_ceiling = m >= 0.8 * peak && ratio >= 10.0;
+        if !(any_clipped || at_ceiling || ratio >= SUN_BRIGHT_RATIO) || core.is_empty() {
+            continue;
+        }
+        // Without a clipped pixel, a small core is all that tells the sun from a lit cloud.
+        let core_limit = match any_clipped || ratio >= SUN_BRIGHT_RATIO {
+            true => SUN_CORE_MAX_DEG,
+            false => 1.0,
+        };
+        // Centre: the core's centroid, weighted by luminance above the core's floor.
+        let floor = core.iter().map(|&i| raw(i)).fold(f32::INFINITY, f32::min);
+        let (mut sx, mut sy, mut sw, mut omega) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        let (mut ux, mut uy) = (0.0f64, 0.0f64);
+        for &i in &core {
+            let (x, y) = ((x0 + i % bw) as f64 + 0.5, (y0 + i / bw) as f64 + 0.5);
+            let w = f64::from(raw(i) - floor) + 1e-6 * f64::from(m.max(1e-30));
+            sx += w * x;
+            sy += w * y;
+            sw += w;
+            ux += x;
+            uy += y;
+            omega += solid_angle(x, y);
+        }
+        let _ = (sx, sy, sw);
+        // The centre as the blob's brightest tenth says it (sub-pixel: a pixel the disc only
+        // touches clips in fewer channels and reads dimmer).
+        let top = background + 0.9 * (m - background);
+        let (mut tx, mut ty, mut tw) = (0.0f64, 0.0f64, 0.0f64);
+        for &i in members.iter() {
+            let v = raw(i);
+            if v >= top {
+                let w = f64::from(v - top) + 1e-12;
+                tx += w * ((x0 + i % bw) as f64 + 0.5);
+                ty += w * ((y0 + i / bw) as f64 + 0.5);
+                tw += w;
+            }
+        }
+        let (mut x, mut y) = (tx / tw, ty / tw);
+        // A core of a pixel or two: refine over the 3 × 3 pixels around it, weighted by their
+        // excess over the ring of pixels two away (the aureole), so the neighbours the disc or
+        // its glare touched pull the centre by how much they caught.
+        if core.len() <= 2 {
+            let (px, py) = (x.floor() as i64, y.floor() as i64);
+            let get = |dx: i64, dy: i64| -> Option<f32> {
+                let (qx, qy) = (px + dx, py + dy);
+                (qx >= 0 && qy >= 0 && (qx as usize) < width && (qy as usize) < height)
+                    .then(|| luma[qy as usize * width + qx as usize])
+                    .filter(|v| v.is_finite())
+            };
+            let mut ring: Vec<f32> = Vec::new();
+            for d in -2i64..=2 {
+                for (dx, dy) in [(d, -2), (d, 2), (-2, d), (2, d)] {
+                    ring.extend(get(dx, dy));
+                }
+            }
+            if !ring.is_empty() {
+                ring.sort_by(f32::total_cmp);
+                let floor = ring[ring.len() / 2];
+                let (mut ax, mut ay, mut aw) = (0.0f64, 0.0f64, 0.0f64);
+                for dy in -1i64..=1 {
+                    for dx in -1i64..=1 {
+                        if let Some(v) = get(dx, dy) {
+                            let w = f64::from((v - floor).max(0.0));
+                            ax += w * ((px + dx) as f64 + 0.5);
+                            ay += w * ((py + dy) as f64 + 0.5);
+                            aw += w;
+                        }
+                    }
+                }
+                if aw > 0.0 {
+                    (x, y) = (ax / aw, ay / aw);
+                }
+            }
+        }
+        let n = core.len() as f64;
+        let (ux, uy) = (ux / n, uy / n);
+        let core_deg = (omega / std::f64::consts::PI).sqrt().to_degrees();
+        if core_deg > core_limit {
+            continue;
+        }
+        let Some(centre) = geom.pixel_to_vector(x, y) else {
+            continue;
+        };
+        // Compactness in angle: the core's solid angle over the cap around its (unweighted)
+        // centroid that holds every core pixel, half a pixel added; a core of a few pixels
+        // has no shape to judge.
+        let compactness = match (core.len() < 5, geom.pixel_to_vector(ux, uy)) {
+            (true, _) | (_, None) => 1.0,
+            (false, Some(mid)) => {
+                let mut reach = 0.0f64;
+                for &i in &core {
+                    let (px, py) = ((x0 + i % bw) as f64 + 0.5, (y0 + i / bw) as f64 + 0.5);
+                    if let Some(v) = geom.pixel_to_vector(px, py) {
+                        let c = (v[0] * mid[0] + v[1] * mid[1] + v[2] * mid[2]).clamp(-1.0, 1.0);
+                        reach = reach.max(c.acos());
+                    }
+                }
+                let rr = (ux - cx).hypot(uy - cy).max(0.5);
+                let half_px = proj.theta(rr).map_or(0.0, |th| 0.5 / proj.derivative(th));
+                let reach = reach + half_px;
+                let cap = 2.0 * std::f64::consts::PI * (1.0 - reach.cos());
+                (omega / cap).min(1.0)
+            }
+        };
+        if compactness < 0.3 {
+            continue;
+        }
+        let off_prior = clues
+            .prior
+            .map(|(d, _)| Direction::from_vector(centre).angle_to(&d));
+        let contrast = (ratio.log10() / 2.0).clamp(0.0, 1.0);
+        let size = ((SUN_CORE_MAX_DEG - core_deg) / (SUN_CORE_MAX_DEG - 1.0)).clamp(0.0, 1.0);
+        candidates.push(Candidate {
+            x,
+            y,
+            score: compactness * contrast * size,
+            compactness,
+            core_deg,
+            contrast,
+            area: members.len(),
+            ratio,
+            off_prior,
+        });
+    }
+    // With a prior a sun-like blob within its radius wins, the nearest first; otherwise (or
+    // when none is within it: a compass far off) the best scored.
+    let radius = clues.prior.map_or(0.0, |(_, r)| r);
+    let near = |c: &Candidate| c.off_prior.is_some_and(|o| o <= radius);
+    candidates.sort_by(|a, b| match (near(a), near(b)) {
+        (true, true) => a
+            .off_prior
+            .unwrap_or(0.0)
+            .total_cmp(&b.off_prior.unwrap_or(0.0)),
+        (true, false) => std::cmp::Ordering::Less,
+        (false, true) => std::cmp::Ordering::Greater,
+        (false, false) => b.score.total_cmp(&a.score),
+    });
+    let Some(best) = candidates.first() else {
+        return Ok(None);
+    };
+    let runner_up = candidates
+        .iter()
+        .skip(1)
+        .map(|c| c.score)
+        .fold(0.0f64, f64::max);
+    let ambiguity = match near(best) {
+        // The prior settles which is the sun.
+        true => 1.0,
+        false => 1.0 - (runner_up / best.score.max(1e-12)).clamp(0.0, 1.0),
+    };
+    let size = ((SUN_CORE_MAX_DEG - best.core_deg) / (SUN_CORE_MAX_DEG - 1.0)).clamp(0.0, 1.0);
+    let confidence = best.compactness * best.contrast * size * ambiguity;
+    if confidence < 0.15 {
+        return Ok(None);
+    }
+    Ok(Some(SunDetection {
+        pixel: PixelPoint {
+            x: best.x,
+            y: best.y,
+        },
+        confidence,
+        area_px: best.area,
+        peak_to_background: best.ratio,
+    }))
+}
+
+/// The morphological closing (a 3 × 3 dilation, then a 3 × 3 erosion) of the pixel set `set`
+/// (indices into a box `bw` wide), kept to `members`, in scan order: holes and gaps a pixel or
+/// two wide inside `set` are filled, its outline stays where it was.
+fn close_within(set: &[usize], members: &[usize], bw: usize) -> Vec<usize> {
+    let Some((&first, _)) = set.split_first() else {
+        return Vec::new();
+    };
+    // A local grid around the set, two pixels of margin (the dilation's reach plus the
+    // erosion's), in signed box coordinates.
+    let xy = |i: usize| ((i % bw) as i64, (i / bw) as i64);
+    let (mut lx, mut ly, mut hx, mut hy) = {
+        let (x, y) = xy(first);
+        (x, y, x, y)
+    };
+    for &i in set {
+        let (x, y) = xy(i);
+        (lx, ly, hx, hy) = (lx.min(x), ly.min(y), hx.max(x), hy.max(y));
+    }
+    let (lx, ly) = (lx - 2, ly - 2);
+    let (gw, gh) = ((hx + 3 - lx) as usize, (hy + 3 - ly) as usize);
+    let cell = |x: i64, y: i64| -> Option<usize> {
+        let (gx, gy) = (x - lx, y - ly);
+        (gx >= 0 && gy >= 0 && (gx as usize) < gw && (gy as usize) < gh)
+            .then(|| gy as usize * gw + gx as usize)
+    };
+    let mut grid = vec![false; gw * gh];
+    for &i in set {
+        let (x, y) = xy(i);
+        if let Some(c) = cell(x, y) {
+            grid[c] = true;
+        }
+    }
+    let around = |g: &[bool], x: i64, y: i64, all: bool| {
+        let mut n = (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy)));
+        let hit = |(a, b): (i64, i64)| cell(a, b).is_some_and(|c| g[c]);
+        match all {
+            true => n.all(hit),
+            false => n.any(hit),
+        }
+    };
+    let dilated: Vec<bool> = (0..gw * gh)
+        .map(|c| around(&grid, lx + (c % gw) as i64, ly + (c / gw) as i64, false))
+        .collect();
+    members
+        .iter()
+        .copied()
+        .filter(|&i| {
+            let (x, y) = xy(i);
+            cell(x, y).is_some_and(|c| grid[c]) || around(&dilated, x, y, true)
+        })
+        .collect()
+}
+
 /// The median (the `n/2`-th smallest, as `select_nth_unstable`) and the largest of the
 /// non-NaN values (all non-negative and finite here), or `None` for fewer than 16.
 ///
@@ -414,6 +779,33 @@ mod tests {
             }
         }
         out
+    }
+
+    #[test]
+    fn closing_fills_a_clipped_cores_holes_not_its_outline() {
+        // A 7 × 5 box; the set is a ring with a hole and a one-pixel gap; members cover it all.
+        let bw = 7;
+        let at = |x: usize, y: usize| y * bw + x;
+        let set = [
+            at(2, 1),
+            at(3, 1),
+            at(4, 1),
+            at(2, 2),
+            at(4, 2),
+            at(2, 3),
+            at(4, 3),
+        ];
+        let members: Vec<usize> = (0..bw * 5).collect();
+        let mut closed = close_within(&set, &members, bw);
+        closed.sort_unstable();
+        let mut want = set.to_vec();
+        want.extend([at(3, 2), at(3, 3)]);
+        want.sort_unstable();
+        assert_eq!(closed, want);
+        // Kept to the members: a filled pixel that is not a member stays out.
+        let members: Vec<usize> = members.into_iter().filter(|&i| i != at(3, 2)).collect();
+        assert!(!close_within(&set, &members, bw).contains(&at(3, 2)));
+        assert!(close_within(&[], &members, bw).is_empty());
     }
 
     #[test]
