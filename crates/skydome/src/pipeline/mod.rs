@@ -618,12 +618,14 @@ pub fn describe_camera(profile: &mut CameraProfile, br: &Bracket) {
     profile.date = br.info.datetime_original.clone();
 }
 
-/// The header comment that states the units of an absolute dome.
+/// The header comment that states the units of an absolute dome. The scale is written to nine
+/// significant digits: the WebAssembly build's maths library differs from the native one in the
+/// last bits, and the app must write the CLI's bytes.
 fn absolute_header_line(p: &PhotometryReport) -> String {
     let mut s = format!(
         "{}: Radiance W/sr/m2, luminance = 179*(0.265 R + 0.670 G + 0.065 B) cd/m2; scaled by {} from the {} reading",
         ABSOLUTE_UNITS_LINE,
-        fmt_num(p.scale),
+        fmt_num(format!("{:.8e}", p.scale).parse().unwrap_or(p.scale)),
         p.from
     );
     if let Some(d) = p.disagreement_percent {
