@@ -880,18 +880,7 @@ fn reusable(ctx: &Ctx, c: &Capture) -> Option<Record> {
 fn process_one(ctx: &Ctx, c: &Capture) -> Result<Record> {
     let mut row = CaptureRow {
         capture: c.name.clone(),
-        capture_time_utc: c.utc.map(|t| {
-            let u = t.to_offset(time::UtcOffset::UTC);
-            format!(
-                "{:04}-{:02}-{:02}T{:02}:{:02}:{:02}Z",
-                u.year(),
-                u8::from(u.month()),
-                u.day(),
-                u.hour(),
-                u.minute(),
-                u.second()
-            )
-        }),
+        capture_time_utc: c.utc.map(skydome::bracket::format_iso8601_utc),
         frames: c.files.len(),
         exposure_times_s: c.times.clone().unwrap_or_default(),
         options_hash: ctx.fingerprint.to_string(),

@@ -177,14 +177,8 @@ fn day(a: &Args, opts: &SynthOptions, n: usize, quiet: bool) -> Result<()> {
             let t = start + time::Duration::seconds(i64::from(a.interval) * c as i64 + i as i64);
             let fields = ExifFields {
                 exposure_time_s: Some(f.exposure.time_s),
-                datetime_original: Some(format!(
-                    "{:04}:{:02}:{:02} {:02}:{:02}:{:02}",
-                    t.year(),
-                    u8::from(t.month()),
-                    t.day(),
-                    t.hour(),
-                    t.minute(),
-                    t.second()
+                datetime_original: Some(skydome::bracket::format_exif_datetime(
+                    time::PrimitiveDateTime::new(t.date(), t.time()),
                 )),
                 subsec_original: None,
                 offset_time_original: Some(offset.clone()),

@@ -60,7 +60,8 @@ pub fn parse_iso8601(s: &str) -> Option<time::OffsetDateTime> {
     Some(local.assume_offset(parse_utc_offset(&s[split..])?))
 }
 
-pub(super) fn format_exif_datetime(t: time::PrimitiveDateTime) -> String {
+/// A date and time as EXIF writes it, `YYYY:MM:DD HH:MM:SS` (local time, no offset).
+pub fn format_exif_datetime(t: time::PrimitiveDateTime) -> String {
     format!(
         "{:04}:{:02}:{:02} {:02}:{:02}:{:02}",
         t.year(),
@@ -69,6 +70,20 @@ pub(super) fn format_exif_datetime(t: time::PrimitiveDateTime) -> String {
         t.hour(),
         t.minute(),
         t.second()
+    )
+}
+
+/// An instant as ISO 8601 in UTC, `YYYY-MM-DDTHH:MM:SSZ` (whole seconds).
+pub fn format_iso8601_utc(t: time::OffsetDateTime) -> String {
+    let u = t.to_offset(time::UtcOffset::UTC);
+    format!(
+        "{:04}-{:02}-{:02}T{:02}:{:02}:{:02}Z",
+        u.year(),
+        u8::from(u.month()),
+        u.day(),
+        u.hour(),
+        u.minute(),
+        u.second()
     )
 }
 

@@ -31,10 +31,11 @@ mod times;
 pub use checks::{assemble, assemble_with_black_level};
 pub use decode::{check_jpeg_complete, decode, decode_raw};
 pub use dng::{is_dng, RawColour};
-pub use exif::{parse_exif_datetime, parse_iso8601, parse_utc_offset, read_metadata, FileMetadata};
+pub use exif::{
+    format_exif_datetime, format_iso8601_utc, parse_exif_datetime, parse_iso8601, parse_utc_offset,
+    read_metadata, FileMetadata,
+};
 pub use times::{parse_list_file, parse_time, parse_times, times_from_list};
-
-use exif::format_exif_datetime;
 
 use thiserror::Error;
 

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use time::{OffsetDateTime, PrimitiveDateTime, UtcOffset};
 
 use super::{Options, PipelineError};
-use crate::bracket::{self, Bracket};
+use crate::bracket::{self, format_exif_datetime, format_iso8601_utc, Bracket};
 
 /// Where a capture's time or site came from.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -121,7 +121,7 @@ pub(super) fn resolve(o: &Options, br: &Bracket) -> Result<Capture, PipelineErro
         local,
         site,
         report: CaptureReport {
-            time_utc: time.map(iso_utc),
+            time_utc: time.map(format_iso8601_utc),
             time_from,
             latitude_deg: site.map(|s| s.0),
             longitude_deg: site.map(|s| s.1),
@@ -133,17 +133,7 @@ pub(super) fn resolve(o: &Options, br: &Bracket) -> Result<Capture, PipelineErro
 impl Capture {
     /// `CAPDATE=` (local) and `GMT=` (UTC) for the Radiance header, `YYYY:MM:DD HH:MM:SS`.
     pub fn header_times(&self) -> (Option<String>, Option<String>) {
-        let f = |t: PrimitiveDateTime| {
-            format!(
-                "{:04}:{:02}:{:02} {:02}:{:02}:{:02}",
-                t.year(),
-                u8::from(t.month()),
-                t.day(),
-                t.hour(),
-                t.minute(),
-                t.second()
-            )
-        };
+        let f = format_exif_datetime;
         let gmt = self.time.map(|t| {
             let u = t.to_offset(UtcOffset::UTC);
             f(PrimitiveDateTime::new(u.date(), u.time()))
@@ -160,18 +150,4 @@ impl Capture {
             self.report.site_from.name()
         ))
     }
-}
-
-/// `2026-06-21T07:00:00Z`.
-fn iso_utc(t: OffsetDateTime) -> String {
-    let u = t.to_offset(UtcOffset::UTC);
-    format!(
-        "{:04}-{:02}-{:02}T{:02}:{:02}:{:02}Z",
-        u.year(),
-        u8::from(u.month()),
-        u.day(),
-        u.hour(),
-        u.minute(),
-        u.second()
-    )
 }
