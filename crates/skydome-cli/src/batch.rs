@@ -84,7 +84,7 @@ pub struct Args {
     #[arg(long, value_name = "camera.json")]
     pub profile: Option<PathBuf>,
     /// Frame weighting: hat, noise or none (as `skydome merge`).
-    #[arg(long, default_value = "noise", value_parser = parse_weighting)]
+    #[arg(long, default_value = "hat", value_parser = parse_weighting)]
     pub weighting: Weighting,
     /// Black level of the frames, 8-bit code.
     #[arg(long, default_value_t = 0, value_name = "CODE")]

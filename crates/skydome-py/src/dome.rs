@@ -341,7 +341,7 @@ pub fn meta_dict<'py>(py: Python<'py>, meta: &HdrMeta) -> PyResult<Bound<'py, Py
 ///     radius_px (default 3) around pixel (x, y) of the input photos; makes the radiance
 ///     absolute.
 /// weighting
-///     Frame weighting of the merge: "noise" (default), "hat" or "none".
+///     Frame weighting of the merge: "hat" (default), "noise" or "none".
 /// preview
 ///     Also make the tone-mapped preview (:attr:`Dome.preview`).
 /// equirect
@@ -361,11 +361,11 @@ pub fn meta_dict<'py>(py: Python<'py>, meta: &HdrMeta) -> PyResult<Bound<'py, Py
 #[pyfunction]
 #[pyo3(signature = (frames, times=None, *, profile=None, lens=None, fisheye=false,
     lens_model=None, fov=None, crop=false, sun=None, north=None, time=None, lat=None, lon=None,
-    illuminance=None, luminance=None, weighting="noise", preview=false, equirect=None,
+    illuminance=None, luminance=None, weighting="hat", preview=false, equirect=None,
     progress=None, circle=None),
     text_signature = "(frames, times=None, *, profile=None, lens=None, fisheye=False, \
     lens_model=None, fov=None, crop=False, sun='auto', north=None, time=None, lat=None, \
-    lon=None, illuminance=None, luminance=None, weighting='noise', preview=False, equirect=None, \
+    lon=None, illuminance=None, luminance=None, weighting='hat', preview=False, equirect=None, \
     progress=None, circle=None)")]
 #[allow(clippy::too_many_arguments)]
 pub fn run<'py>(
