@@ -63,7 +63,7 @@ def test_mismatched_sizes(scene):
     with pytest.raises(skydome.Error) as e:
         skydome.run(frames, times)
     assert str(e.value) == (
-        f"frames[1]: size {w}x{h - 8} differs from frames[0] ({w}x{h}); "
+        f"frames[1] ({w}x{h - 8}): size differs from frames[0] ({w}x{h}); "
         "all frames must have the same size"
     )
 
@@ -121,7 +121,9 @@ def test_missing_times(scene, cli, tmp_path):
         skydome.run(paths)
     p = run_cli(cli, "merge", *paths, "-o", tmp_path / "x.hdr", check=False)
     cli_msg = p.stderr.strip().removeprefix("error: ")
-    assert cli_msg.startswith(f"{paths[0]}: no exposure time in EXIF; supply the exposure times with --times")
+    # Every file without a time is named (issue 28), the first ones comma-separated.
+    named = ", ".join(str(q) for q in paths[:-1]) + f" and {paths[-1]}"
+    assert cli_msg.startswith(f"{named}: no exposure time in EXIF; supply the exposure times with --times")
     assert str(e.value) == cli_msg.split(" with --times")[0] + (
         " with times=[1/400, 1/100, ...] (seconds, one per frame, in the order given)"
     )
