@@ -228,9 +228,13 @@ function startWork(title, text) {
  *  camera reported the times asked for, so its exposure setting is not to blame. */
 function capturedRefusal(err) {
   const text = String(err && err.message ? err.message : err);
-  const m = text.match(/^(photo \d+ of \d+)\.jpg: pixels are nearly identical to (photo \d+ of \d+)\.jpg/i);
+  // The core names every photo of each group of identical ones: "A, B and C: pixels are …"
+  // (groups separated by "; ").
+  const m = text.match(/^(.+?): pixels are nearly identical although/i);
   if (!m) return err;
-  return new Sentence(`P${m[1].slice(1)} came out nearly identical to ${m[2]} although the camera reported the exposure times asked for, so this browser cannot bracket with it: take the bracket with the camera app and merge it with Pick photos.`);
+  const names = m[1].replace(/\.jpg/gi, '');
+  if (!/^photo \d+ of \d+((, | and |; )photo \d+ of \d+)*$/i.test(names)) return err;
+  return new Sentence(`P${names.slice(1)} came out nearly identical although the camera reported the exposure times asked for, so this browser cannot bracket with it: take the bracket with the camera app and merge it with Pick photos.`);
 }
 
 async function merge(frames, times, optionExtras = {}, { honoured = false } = {}) {
