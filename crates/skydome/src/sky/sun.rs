@@ -59,14 +59,11 @@ pub fn detect_sun_luma(
         });
     }
     // Bounding box of the region inside the frame.
-    let x0 = (region.cx - region.r).floor().max(0.0) as usize;
-    let y0 = (region.cy - region.r).floor().max(0.0) as usize;
-    let x1 = ((region.cx + region.r).ceil().max(0.0) as usize).min(width);
-    let y1 = ((region.cy + region.r).ceil().max(0.0) as usize).min(height);
-    if x1 <= x0 || y1 <= y0 {
+    let (xs, ys) = region.pixel_bounds(width, height);
+    if xs.is_empty() || ys.is_empty() {
         return Ok(None);
     }
-    let (bw, bh) = (x1 - x0, y1 - y0);
+    let (x0, y0, bw, bh) = (xs.start, ys.start, xs.len(), ys.len());
     // Box blur of radius b over region pixels (outside pixels do not count).
     let b = ((region.r / 150.0).round() as usize).max(1);
     let blurred = region_box_mean(luma, width, (x0, y0, bw, bh), region, b);
@@ -265,14 +262,11 @@ pub fn find_sun(
         return Ok(None);
     }
     let luma: Vec<f32> = img.pixels().map(luminance).collect();
-    let x0 = (region.cx - region.r).floor().max(0.0) as usize;
-    let y0 = (region.cy - region.r).floor().max(0.0) as usize;
-    let x1 = ((region.cx + region.r).ceil().max(0.0) as usize).min(width);
-    let y1 = ((region.cy + region.r).ceil().max(0.0) as usize).min(height);
-    if x1 <= x0 || y1 <= y0 {
+    let (xs, ys) = region.pixel_bounds(width, height);
+    if xs.is_empty() || ys.is_empty() {
         return Ok(None);
     }
-    let (bw, bh) = (x1 - x0, y1 - y0);
+    let (x0, y0, bw, bh) = (xs.start, ys.start, xs.len(), ys.len());
     let b = ((region.r / 150.0).round() as usize).max(1);
     let blurred = region_box_mean(&luma, width, (x0, y0, bw, bh), &region, b);
     let Some((background, _)) = median_and_peak(&blurred) else {
