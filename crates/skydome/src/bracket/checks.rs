@@ -42,8 +42,11 @@ pub fn assemble_with_black_level(
     let (frames, info) = oriented_and_sorted_by_exposure(decoded, times, orientation)?;
     neighbours_at_least_a_sixth_stop_apart(&frames)?;
     let (frames, checks) = frames_that_inform(frames, black_level, &mut warnings)?;
-    one_scene(&frames, &checks)?;
+    // Identical first: frames that carry the same picture wherever both show one are the same
+    // scene, whatever a few moving blocks say (a camera that ignored the bracket while
+    // something changed in a corner would otherwise be called two scenes).
     no_identical_neighbours(&frames, &checks)?;
+    one_scene(&frames, &checks)?;
     no_frame_darker_when_exposed_longer(&frames, &checks)?;
     let pixel_orientation = match orientation {
         OrientationPolicy::Apply => 1,

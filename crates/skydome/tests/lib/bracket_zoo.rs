@@ -474,6 +474,47 @@ fn cases() -> Vec<Case> {
             "nearly identical",
         ]),
     );
+    // Chromium's fake camera (the phone app's browser tests) ignores the exposure asked for:
+    // flat green (0, 127, 0) with a 40-pixel yellow square in each corner whose level steps on
+    // between shots. Identical where it matters, though the corners reorder the only blocks
+    // that differ (the levels of three of its shots, read from takePhoto()).
+    let (fw, fh) = (640, 480);
+    let fake = |corners: [u8; 4], k: usize| {
+        let px: Vec<u8> = (0..fw * fh)
+            .flat_map(|p| {
+                let (x, y) = (p % fw, p / fw);
+                let corner = match (x < 40, x >= fw - 40, y < 40, y >= fh - 40) {
+                    (true, _, true, _) => Some(corners[0]),
+                    (_, true, true, _) => Some(corners[1]),
+                    (true, _, _, true) => Some(corners[2]),
+                    (_, true, _, true) => Some(corners[3]),
+                    _ => None,
+                };
+                corner.map_or([0, 127, 0], |v| [v, v, 0])
+            })
+            .collect();
+        File {
+            name: format!("shot_{k}.png"),
+            bytes: encode::png(
+                &px,
+                fw,
+                fh,
+                Layout::Rgb8,
+                Some(&exif_time(0.004 * 2f64.powi(k as i32))),
+            ),
+        }
+    };
+    case(
+        "camera ignored the bracket, something changed between shots",
+        vec![
+            fake([61, 204, 167, 54], 0),
+            fake([153, 40, 3, 146], 1),
+            fake([7, 150, 113, 0], 2),
+        ],
+        None,
+        &d,
+        Verdict::Refused(&["shot_0.png", "shot_1.png", "shot_2.png", "nearly identical"]),
+    );
     // The middle frame from another view (the camera panned half a frame and tilted, its
     // ground and sky where the bracket has others), at the middle frame's exposure.
     let mut turned = shots(&[0.0], 9).remove(0);
