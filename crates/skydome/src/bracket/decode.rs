@@ -3,9 +3,7 @@
 
 use std::io::Cursor;
 
-use super::{
-    exif::read_exif, BracketError, CaptureInfo, DecodeOptions, DecodedFrame, Pixels, RawColour,
-};
+use super::{exif::read_exif, BracketError, DecodeOptions, DecodedFrame, Pixels, RawColour};
 
 /// Decodes one encoded image (JPEG, PNG, TIFF or DNG) and reads its EXIF.
 ///
@@ -104,20 +102,8 @@ fn decode_picture(
     } else {
         Pixels::U8(img.into_rgb8().into_raw())
     };
-    let mut frame = DecodedFrame {
-        name: name.to_string(),
-        width: w as usize,
-        height: h as usize,
-        pixels,
-        exif_time_s: None,
-        iso: None,
-        f_number: None,
-        info: CaptureInfo {
-            orientation: 1,
-            ..CaptureInfo::default()
-        },
-        non_srgb_icc: icc.as_deref().and_then(non_srgb_description),
-    };
+    let mut frame = DecodedFrame::new(name, w as usize, h as usize, pixels);
+    frame.non_srgb_icc = icc.as_deref().and_then(non_srgb_description);
     read_exif(bytes, &mut frame);
     Ok(frame)
 }

@@ -346,20 +346,7 @@ pub fn decode_dng(
         black_level: levels.black.first().copied().unwrap_or(0.0),
         white_level: levels.white.first().copied().unwrap_or(0.0),
     };
-    let mut frame = DecodedFrame {
-        name: name.to_string(),
-        width: aw,
-        height: ah,
-        pixels: Pixels::U16(rgb),
-        exif_time_s: None,
-        iso: None,
-        f_number: None,
-        info: super::CaptureInfo {
-            orientation: 1,
-            ..super::CaptureInfo::default()
-        },
-        non_srgb_icc: None,
-    };
+    let mut frame = DecodedFrame::new(name, aw, ah, Pixels::U16(rgb));
     super::exif::read_exif(bytes, &mut frame);
     // Sensor order: the CFA phase must survive (see the module docs).
     frame.info.orientation = 1;

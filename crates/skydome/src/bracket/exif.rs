@@ -117,20 +117,7 @@ impl FileMetadata {
 /// Reads a file's EXIF (JPEG, PNG, TIFF bytes; the head of a JPEG is enough) without decoding
 /// its pixels. A file without readable EXIF gives empty metadata.
 pub fn read_metadata(bytes: &[u8]) -> FileMetadata {
-    let mut frame = DecodedFrame {
-        name: String::new(),
-        width: 0,
-        height: 0,
-        pixels: super::Pixels::U8(Vec::new()),
-        exif_time_s: None,
-        iso: None,
-        f_number: None,
-        info: super::CaptureInfo {
-            orientation: 1,
-            ..super::CaptureInfo::default()
-        },
-        non_srgb_icc: None,
-    };
+    let mut frame = DecodedFrame::new("", 0, 0, super::Pixels::U8(Vec::new()));
     read_exif(bytes, &mut frame);
     FileMetadata {
         exposure_time_s: frame.exif_time_s,

@@ -251,6 +251,27 @@ pub struct DecodedFrame {
     pub non_srgb_icc: Option<String>,
 }
 
+impl DecodedFrame {
+    /// A frame as a decoder hands it over before its metadata is read: no EXIF exposure,
+    /// orientation 1 (stored order), no ICC profile; the EXIF reader fills in the rest.
+    pub fn new(name: &str, width: usize, height: usize, pixels: Pixels) -> Self {
+        DecodedFrame {
+            name: name.to_string(),
+            width,
+            height,
+            pixels,
+            exif_time_s: None,
+            iso: None,
+            f_number: None,
+            info: CaptureInfo {
+                orientation: 1,
+                ..CaptureInfo::default()
+            },
+            non_srgb_icc: None,
+        }
+    }
+}
+
 impl From<Frame> for DecodedFrame {
     /// The frame as a decoder would hand it over from a file whose EXIF gave its exposure
     /// (time, ISO, f-number) and no rotation (orientation 1): e.g. a simulated frame
