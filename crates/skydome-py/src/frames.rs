@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use numpy::PyArray3;
 use pyo3::prelude::*;
 use pyo3::types::{PyByteArray, PyBytes, PyMemoryView, PyString};
-use skydome::bracket::{self, CaptureInfo, DecodeOptions, DecodedFrame, Pixels};
+use skydome::bracket::{self, DecodeOptions, DecodedFrame, Pixels};
 use skydome::pipeline::{EncodedFrame, Frames, Input, PipelineError};
 
 use crate::arrays;
@@ -234,20 +234,9 @@ fn frame(i: usize, obj: &Bound<'_, PyAny>) -> PyResult<FrameIn> {
                 ),
             ));
         };
-        return Ok(FrameIn::Array(Box::new(DecodedFrame {
-            name: arg,
-            width,
-            height,
-            pixels,
-            exif_time_s: None,
-            iso: None,
-            f_number: None,
-            info: CaptureInfo {
-                orientation: 1,
-                ..CaptureInfo::default()
-            },
-            non_srgb_icc: None,
-        })));
+        return Ok(FrameIn::Array(Box::new(DecodedFrame::new(
+            &arg, width, height, pixels,
+        ))));
     }
     Err(type_error(
         &arg,
