@@ -182,11 +182,16 @@ function runJob(id, optionsJson, times) {
   // Milliseconds spent in each stage (from its first progress event to the next stage's), for
   // web-tests/measure.mjs.
   const stages = {};
+  // The wasm memory's size (its high-water mark so far) at the end of each stage, in bytes.
+  const stageMemory = { decoded: wasmMemory() };
   let current = null;
   let since = t0;
   const mark = (next) => {
     const now = performance.now();
-    if (current) stages[current] = (stages[current] || 0) + (now - since);
+    if (current) {
+      stages[current] = (stages[current] || 0) + (now - since);
+      stageMemory[current] = wasmMemory();
+    }
     current = next;
     since = now;
   };
@@ -207,6 +212,7 @@ function runJob(id, optionsJson, times) {
     lens_profile: outcome.lens_profile_json(),
     ms: performance.now() - t0,
     stages,
+    stageMemory,
     core: coreInfo,
     luminance: JSON.parse(outcome.luminance_json()),
   };
