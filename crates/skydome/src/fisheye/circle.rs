@@ -120,8 +120,9 @@ pub fn detect_circle_luma(
 
 /// The corners' level may be at most this fraction of the median level inside the circle.
 /// A lens housing passes no light: on the best-exposed frame of a real fish-eye it is a few
-/// percent of the sky's level (0–12 % on the project's sets), while a test pattern's or an
-/// ordinary photo's round object sits on a background about as bright as itself.
+/// percent of the sky's level (the Alpnach all-sky frames and the synthetic domes pass), while a
+/// test pattern's or an ordinary photo's round object sits on a background about as bright as
+/// itself (Chromium's fake camera: 50 %).
 const HOUSING_MAX_FRACTION: f32 = 0.35;
 
 /// Doubts a fitted circle that has no dark housing around it: [`FisheyeError::NoHousing`] when
@@ -130,8 +131,14 @@ const HOUSING_MAX_FRACTION: f32 = 0.35;
 fn doubt_housing(img: &Blurred, housing: f32, c: &Circle) -> Result<(), FisheyeError> {
     let r = 0.9 * c.r;
     let step = ((r / 32.0).floor() as usize).max(1);
-    let (x0, x1) = ((c.cx - r).max(0.0) as usize, ((c.cx + r).ceil() as usize).min(img.w));
-    let (y0, y1) = ((c.cy - r).max(0.0) as usize, ((c.cy + r).ceil() as usize).min(img.h));
+    let (x0, x1) = (
+        (c.cx - r).max(0.0) as usize,
+        ((c.cx + r).ceil() as usize).min(img.w),
+    );
+    let (y0, y1) = (
+        (c.cy - r).max(0.0) as usize,
+        ((c.cy + r).ceil() as usize).min(img.h),
+    );
     let mut inside = Vec::new();
     for y in (y0..y1).step_by(step) {
         for x in (x0..x1).step_by(step) {

@@ -439,8 +439,8 @@ fn test_pattern(housing: Option<[u8; 3]>, full: bool) -> skydome::image::RgbImag
 
 #[test]
 fn a_circle_without_a_dark_housing_is_doubted() {
-    // The fake camera's pie slice on green: its arc fits a circle, but the corners are as
-    // bright as the circle's inside (100 % here), so it is no lens's picture circle.
+    // The fake camera's pie slice on green: its arc fits a circle, but the corners are half as
+    // bright as what the fit takes for the circle's inside (50 %), so it is no lens's circle.
     for full in [false, true] {
         let err = detect_circle(&test_pattern(None, full)).unwrap_err();
         eprintln!("test pattern (full disc {full}): {err}");
