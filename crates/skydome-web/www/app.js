@@ -51,7 +51,15 @@ function showInfo(text) {
   m.hidden = false;
 }
 
-function clearMessage() { $('message').hidden = true; $('no-circle').hidden = true; $('squeezed').hidden = true; }
+let squeezedAnswer = null; // answers the pending question of acceptSqueezed
+
+function clearMessage() {
+  $('message').hidden = true;
+  $('no-circle').hidden = true;
+  // A squeezed bracket left unanswered (the user went on to something else) is not merged.
+  if (squeezedAnswer) squeezedAnswer(false);
+  $('squeezed').hidden = true;
+}
 
 function show(name) {
   for (const s of screens) $(`screen-${s}`).hidden = s !== name;
@@ -860,7 +868,7 @@ function squeezedSteps(times, spacing) {
 }
 
 /** Says what a squeezed bracket is and asks whether to merge it; resolves to true to merge,
- *  false to take it again. */
+ *  false to take it again (or when the question is dismissed by other work, clearMessage). */
 function acceptSqueezed(times, steps, spacing) {
   const box = $('squeezed');
   const evs = steps.map((s) => s.toFixed(1));
@@ -870,8 +878,13 @@ function acceptSqueezed(times, steps, spacing) {
   box.hidden = false;
   box.scrollIntoView({ block: 'nearest' });
   return new Promise((resolve) => {
-    $('squeezed-merge').onclick = () => { box.hidden = true; resolve(true); };
-    $('squeezed-retake').onclick = () => { box.hidden = true; resolve(false); };
+    squeezedAnswer = (merge) => {
+      squeezedAnswer = null;
+      box.hidden = true;
+      resolve(merge);
+    };
+    $('squeezed-merge').onclick = () => squeezedAnswer && squeezedAnswer(true);
+    $('squeezed-retake').onclick = () => squeezedAnswer && squeezedAnswer(false);
   });
 }
 
