@@ -3,7 +3,9 @@
 // preview, the tab's peak memory (renderer process resident set, sampled every 100 ms; the
 // worker runs in the same process), the wasm linear memory's high-water mark, and the native
 // CLI's time for the same frames and options. Also the gzipped .wasm size.
-//   node measure.mjs [--size 3464] [--threads N] [--out results.json]
+//   node measure.mjs [--size 3464] [--evs -2,0,2] [--threads N] [--out results.json]
+// --evs gives the frames' exposure values (`skydome synth --evs`): -4,-3,-2,-1,0,1,2,3,4 is a
+// phone's 9-frame bracket.
 // --threads N loads the page with ?threads=N: the threaded core with a pool of N workers (the
 // page is cross-origin isolated by `skydome serve`), 0 the single-threaded core; without it the
 // app picks (one thread per core).
@@ -24,6 +26,7 @@ const arg = (name, dflt) => {
 const size = Number(arg('--size', '3464')); // 3464² = 12.0 MP
 const outFile = arg('--out', null);
 const threads = arg('--threads', null);
+const evs = arg('--evs', '-2,0,2');
 
 /** Memory of this test's Chromium renderer processes (command lines carry the fresh profile's
  *  folder, so other Chromium instances on the machine are not counted): for each, the resident
@@ -46,8 +49,17 @@ function renderers(profile) {
 }
 
 const peaks = new Map();
+// The tab's resident set over the merge (ms since the photos were picked, MB), to see which step
+// makes the peak.
+const timeline = [];
+let t0 = null;
 function sample(profile) {
-  for (const [pid, m] of renderers(profile)) {
+  const now = renderers(profile);
+  if (t0 != null && now.size) {
+    const top = Math.max(...[...now.values()].map((m) => m.rss));
+    timeline.push([Math.round(performance.now() - t0), Math.round(top / 2 ** 20)]);
+  }
+  for (const [pid, m] of now) {
     const p = peaks.get(pid) || { rss: 0, anon: 0, shmem: 0 };
     peaks.set(pid, { rss: Math.max(p.rss, m.rss), anon: Math.max(p.anon, m.anon), shmem: Math.max(p.shmem, m.shmem) });
   }
@@ -63,7 +75,7 @@ const cliBin = process.env.SKYDOME_BIN
 if (!existsSync(cliBin)) throw new Error(`${cliBin} is missing: run cargo build --release -p skydome-cli`);
 const dir = tempDir('measure');
 console.error(`synthesising a ${size}² bracket in ${dir}`);
-execFileSync(cliBin, ['synth', '-o', dir, '--size', String(size), '--quiet']);
+execFileSync(cliBin, ['synth', '-o', dir, '--size', String(size), `--evs=${evs}`, '--quiet']);
 const frames = readdirSync(dir).filter((f) => /^frame_\d+\.jpg$/.test(f)).sort().map((f) => path.join(dir, f));
 
 const cliArgs = ['merge', ...frames, '--times-file', path.join(dir, 'times.txt'), '--fisheye',
@@ -94,15 +106,20 @@ try {
   await cdp.send('Performance.enable');
   const since = await p.page.evaluate(() => Date.now());
   const w0 = performance.now();
+  t0 = w0;
   await p.page.setInputFiles('#gallery', [...frames, path.join(dir, 'times.txt')]);
   const msg = await resultOrError(p.page, since);
   const wallMs = performance.now() - w0;
+  // The preview on screen (decoded by the page) is part of the tab's memory.
+  await p.page.waitForFunction(() => document.getElementById('preview').complete);
+  await p.page.waitForTimeout(1000);
   if (msg) throw new Error(msg);
   sample(p.profile);
   const peak = tabPeak();
   const metrics = Object.fromEntries((await cdp.send('Performance.getMetrics')).metrics.map((m) => [m.name, m.value]));
   const core = await p.page.evaluate(() => window.__skydomeCoreMs);
   const stages = await p.page.evaluate(() => window.__skydomeStageMs);
+  const stageMemory = await p.page.evaluate(() => window.__skydomeStageMemory);
   const wasm = await p.page.evaluate(() => window.__skydomeAsk('memory'));
   const coreInfo = await p.page.evaluate(() => window.__skydomeCore);
   // The .wasm the page loaded.
@@ -124,7 +141,9 @@ try {
     tab_before_rss_mb: baseline.rss / 2 ** 20,
     tab_before_own_mb: baseline.anon / 2 ** 20,
     wasm_memory_high_water_mb: wasm.wasmBytes / 2 ** 20,
+    wasm_memory_after_stage_mb: Object.fromEntries(Object.entries(stageMemory || {}).map(([k, v]) => [k, v / 2 ** 20])),
     page_js_heap_used_mb: metrics.JSHeapUsedSize / 2 ** 20,
+    tab_rss_timeline_ms_mb: timeline,
     wasm_bytes: raw,
     wasm_gzip_bytes: gz,
   };

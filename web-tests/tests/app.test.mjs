@@ -47,14 +47,27 @@ test('capture path: three exposures requested and read back, the core refuses id
     await screenshot(p.page, '1-camera');
     const status = await p.page.textContent('#camera-status');
     assert.match(status, /Manual exposure/, status);
+    // The fake camera offers 1–10 ms: three photos 2 EV apart (16×) do not fit, so the bracket
+    // is squeezed. The app says what it took and asks; "Take again" merges nothing.
+    await p.page.click('#capture');
+    await p.page.waitForSelector('#squeezed:not([hidden])');
+    const squeezed = await p.page.textContent('#squeezed-text');
+    assert.match(squeezed, /could not hold 3 photos 2 EV apart: it took 1\/1000, 1\/\d+, 1\/100 s, \d\.\d and \d\.\d EV apart/, squeezed);
+    assert.ok(await p.page.evaluate(() => document.getElementById('message').hidden), 'nothing merged yet');
+    await p.page.click('#squeezed-retake');
+    assert.match(await p.page.textContent('#camera-status'), /Not merged/);
+    await p.page.waitForFunction(() => !document.getElementById('capture').disabled);
     const since = await p.page.evaluate(() => Date.now());
     await p.page.click('#capture');
+    await p.page.waitForSelector('#squeezed:not([hidden])');
+    await p.page.click('#squeezed-merge');
     const msg = await resultOrError(p.page, since);
     const cap = JSON.parse(await p.page.evaluate(() => document.body.dataset.capture || 'null'));
     assert.ok(cap, 'the bracket was taken');
     assert.equal(cap.requested.length, 3);
     assert.equal(new Set(cap.requested).size, 3, `three different times: ${cap.requested}`);
     assert.deepEqual(cap.readBack, cap.requested, 'getSettings() reports the requested times');
+    assert.equal(cap.steps.length, 2, `the steps taken are reported: ${cap.steps}`);
     // The fake camera's photos are identical whatever the exposure: the core refuses them.
     oneSentence(msg);
     assert.match(msg, /identical/i, msg);

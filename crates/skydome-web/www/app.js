@@ -51,7 +51,15 @@ function showInfo(text) {
   m.hidden = false;
 }
 
-function clearMessage() { $('message').hidden = true; $('no-circle').hidden = true; }
+let squeezedAnswer = null; // answers the pending question of acceptSqueezed
+
+function clearMessage() {
+  $('message').hidden = true;
+  $('no-circle').hidden = true;
+  // A squeezed bracket left unanswered (the user went on to something else) is not merged.
+  if (squeezedAnswer) squeezedAnswer(false);
+  $('squeezed').hidden = true;
+}
 
 function show(name) {
   for (const s of screens) $(`screen-${s}`).hidden = s !== name;
@@ -310,7 +318,8 @@ async function editCircle(times, optionExtras) {
   const draw = () => {
     ring.setAttribute('cx', c.cx); ring.setAttribute('cy', c.cy); ring.setAttribute('r', c.r);
     ring.setAttribute('stroke-width', String(Math.max(2, w / 150)));
-    document.body.dataset.circle = `${Math.round(c.cx)},${Math.round(c.cy)},${Math.round(c.r)}`;
+    // The circle as it will be used (tenths of a pixel), for the browser tests.
+    document.body.dataset.circle = [c.cx, c.cy, c.r].map((v) => Math.round(v * 10) / 10).join(',');
   };
   draw();
   const toPhoto = (ev) => {
@@ -390,6 +399,7 @@ async function afterRun(result) {
   show('result');
   window.__skydomeCoreMs = result.ms; // read by web-tests/measure.mjs
   window.__skydomeStageMs = result.stages;
+  window.__skydomeStageMemory = result.stageMemory;
   window.__skydomeCore = result.core;
   document.body.dataset.ready = String(Date.now());
 }
@@ -804,6 +814,14 @@ async function startCamera() {
       ? new Sentence('The camera was not allowed; pick bracketed photos from the gallery instead.') : err;
     $('camera-status').textContent = camera.manualExposure() ? '' : await sentenceOf(refused);
   }
+  keepOfferInView();
+}
+
+/** An offer on the camera screen (no circle found, a squeezed bracket) stays in view when the
+ *  status line above it is rewritten (the camera restarting after a merge does that). */
+function keepOfferInView() {
+  const box = ['squeezed', 'no-circle'].map((id) => $(id)).find((b) => !b.hidden);
+  if (box) box.scrollIntoView({ block: 'nearest' });
 }
 
 async function exifTime(blob, name) {
@@ -824,16 +842,50 @@ async function capture() {
       exifTime,
       (t) => { $('camera-status').textContent = t; },
     );
-    document.body.dataset.capture = JSON.stringify({ requested: shot.requested, readBack: shot.readBack, heading, time: when });
+    const times = shot.frames.map((f) => f.time_s);
+    const steps = squeezedSteps(times, settings.spacing);
+    document.body.dataset.capture = JSON.stringify({ requested: shot.requested, readBack: shot.readBack, heading, time: when, steps });
+    if (steps && !(await acceptSqueezed(times, steps, settings.spacing))) {
+      $('camera-status').textContent = 'Not merged: tap Capture to take the bracket again.';
+      return;
+    }
     const frames = [];
     for (const f of shot.frames) frames.push({ name: f.name, bytes: await f.blob.arrayBuffer() });
     lastRunSource = 'camera';
-    await merge(frames, shot.frames.map((f) => f.time_s), { time: when }, { honoured: true });
+    await merge(frames, times, { time: when }, { honoured: true });
   } catch (err) {
     await showError(err);
   } finally {
     $('capture').disabled = !camera.manualExposure();
   }
+}
+
+/** The steps between the exposures taken, in EV, when one is more than 0.25 EV off the spacing
+ *  asked for (the camera's range of exposure times could not hold the bracket); else null. */
+function squeezedSteps(times, spacing) {
+  const steps = times.slice(1).map((t, i) => Math.log2(t / times[i]));
+  return steps.some((s) => Math.abs(s - spacing) > 0.25) ? steps : null;
+}
+
+/** Says what a squeezed bracket is and asks whether to merge it; resolves to true to merge,
+ *  false to take it again (or when the question is dismissed by other work, clearMessage). */
+function acceptSqueezed(times, steps, spacing) {
+  const box = $('squeezed');
+  const evs = steps.map((s) => s.toFixed(1));
+  const apart = evs.length > 1 ? `${evs.slice(0, -1).join(', ')} and ${evs[evs.length - 1]}` : evs[0];
+  $('squeezed-text').textContent = `The camera's exposure times could not hold ${times.length} photos ${spacing} EV apart: it took ${times.map(timeText).join(', ')} s, ${apart} EV apart. Merge these, or take the bracket again (fewer photos or a smaller spacing in Settings fit the camera).`;
+  $('camera-status').textContent = 'Bracket taken with smaller steps than asked.';
+  box.hidden = false;
+  box.scrollIntoView({ block: 'nearest' });
+  return new Promise((resolve) => {
+    squeezedAnswer = (merge) => {
+      squeezedAnswer = null;
+      box.hidden = true;
+      resolve(merge);
+    };
+    $('squeezed-merge').onclick = () => squeezedAnswer && squeezedAnswer(true);
+    $('squeezed-retake').onclick = () => squeezedAnswer && squeezedAnswer(false);
+  });
 }
 
 function isoNow() {

@@ -113,7 +113,52 @@ pub fn detect_circle_luma(
         centre = (fit.circle.cx, fit.circle.cy);
         best = Some(fit);
     }
-    best.ok_or(FisheyeError::NoCircle { points: 0 })
+    let fit = best.ok_or(FisheyeError::NoCircle { points: 0 })?;
+    doubt_housing(&img, housing, &fit.circle)?;
+    Ok(fit)
+}
+
+/// The corners' level may be at most this fraction of the median level inside the circle.
+/// A lens housing passes no light: on the best-exposed frame of a real fish-eye it is a few
+/// percent of the sky's level (the Alpnach all-sky frames and the synthetic domes pass), while a
+/// test pattern's or an ordinary photo's round object sits on a background about as bright as
+/// itself (Chromium's fake camera: 50 %).
+const HOUSING_MAX_FRACTION: f32 = 0.35;
+
+/// Doubts a fitted circle that has no dark housing around it: [`FisheyeError::NoHousing`] when
+/// the corners' level (`housing`, the blurred value) exceeds [`HOUSING_MAX_FRACTION`] of the
+/// median blurred level inside 0.9 of the circle's radius (sampled on a grid of about 64 × 64).
+fn doubt_housing(img: &Blurred, housing: f32, c: &Circle) -> Result<(), FisheyeError> {
+    let r = 0.9 * c.r;
+    let step = ((r / 32.0).floor() as usize).max(1);
+    let (x0, x1) = (
+        (c.cx - r).max(0.0) as usize,
+        ((c.cx + r).ceil() as usize).min(img.w),
+    );
+    let (y0, y1) = (
+        (c.cy - r).max(0.0) as usize,
+        ((c.cy + r).ceil() as usize).min(img.h),
+    );
+    let mut inside = Vec::new();
+    for y in (y0..y1).step_by(step) {
+        for x in (x0..x1).step_by(step) {
+            let (dx, dy) = (x as f64 + 0.5 - c.cx, y as f64 + 0.5 - c.cy);
+            if dx * dx + dy * dy <= r * r {
+                inside.push(img.sums[y * img.w + x]);
+            }
+        }
+    }
+    if inside.is_empty() {
+        return Ok(());
+    }
+    let mid = inside.len() / 2;
+    let level = Blurred::value(*inside.select_nth_unstable(mid).1);
+    if housing > HOUSING_MAX_FRACTION * level {
+        return Err(FisheyeError::NoHousing {
+            housing_percent: f64::from(100.0 * housing / level.max(1.0 / 9.0)),
+        });
+    }
+    Ok(())
 }
 
 /// The 3×3 box blur of an 8-bit image (edge pixels replicate), to tame sensor noise before

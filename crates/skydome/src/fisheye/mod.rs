@@ -89,6 +89,13 @@ pub enum FisheyeError {
         /// Boundary points found.
         points: usize,
     },
+    /// A circle was found, but what surrounds it is not a lens housing: its corners are not dark
+    /// against the circle's inside (a test pattern, a round object in an ordinary photo).
+    #[error("a circle was found but no dark lens housing around it (the corners are at {housing_percent:.0} % of the circle's level): not a fish-eye picture circle; give the circle by hand if it is one")]
+    NoHousing {
+        /// The corners' level as a percentage of the median level inside the circle.
+        housing_percent: f64,
+    },
     /// Too few lens measurements for the requested model.
     #[error("{model} needs at least {needed} measurements with distinct angles > 0°, got {got}: measure more angles")]
     TooFewSamples {

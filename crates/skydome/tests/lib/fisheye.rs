@@ -414,6 +414,58 @@ fn detection_rejects_blank_and_tiny_images() {
     ));
 }
 
+/// A picture like Chromium's fake camera: a bright pie slice of a disc (radius 240 px, a
+/// quarter of it filled) on an even mid-green background, 640 × 480; `housing` paints the
+/// outside of the disc instead, `full` fills the whole disc.
+fn test_pattern(housing: Option<[u8; 3]>, full: bool) -> skydome::image::RgbImage<u8> {
+    let (w, h) = (640usize, 480usize);
+    let (cx, cy, r) = (320.0f64, 240.0f64, 200.0f64);
+    let mut img = skydome::image::RgbImage::<u8>::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let (dx, dy) = (x as f64 + 0.5 - cx, y as f64 + 0.5 - cy);
+            let inside = dx.hypot(dy) <= r;
+            let slice = full || (dx > 0.0 && dy > 0.0);
+            let px = match (inside, slice, housing) {
+                (true, true, _) => [70, 255, 20],
+                (false, _, Some(c)) => c,
+                _ => [0, 128, 0],
+            };
+            img.data[3 * (y * w + x)..][..3].copy_from_slice(&px);
+        }
+    }
+    img
+}
+
+#[test]
+fn a_circle_without_a_dark_housing_is_doubted() {
+    // The fake camera's pie slice on green: its arc fits a circle, but the corners are half as
+    // bright as what the fit takes for the circle's inside (50 %), so it is no lens's circle.
+    for full in [false, true] {
+        let err = detect_circle(&test_pattern(None, full)).unwrap_err();
+        eprintln!("test pattern (full disc {full}): {err}");
+        match err {
+            FisheyeError::NoHousing { housing_percent } => assert!(
+                housing_percent > 35.0,
+                "{housing_percent} % is above the 35 % limit"
+            ),
+            e => panic!("expected NoHousing, got {e}"),
+        }
+    }
+    // The same picture with a black housing around the disc is a lens circle, found within a
+    // pixel (the control: the doubt is about the housing, not the pattern).
+    let fit = detect_circle(&test_pattern(Some([0, 0, 0]), false)).unwrap();
+    let truth = Circle {
+        cx: 320.0,
+        cy: 240.0,
+        r: 200.0,
+    };
+    assert!(circle_close(&fit.circle, &truth, 1.0), "{fit:?}");
+    // A housing at 30 % of the green (a flare-lit housing) is still one.
+    let grey = Some([0, 38, 0]);
+    assert!(detect_circle(&test_pattern(grey, false)).is_ok());
+}
+
 #[test]
 fn circle_found_on_the_real_alpnach_all_sky_frames() {
     let Some(dir) = shared_data("skycam_alpnach_fisheye") else {
