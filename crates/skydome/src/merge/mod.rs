@@ -59,7 +59,7 @@ use crate::noise::{self, NoiseEstimate, NoiseModel};
 use crate::response::{Response, LEVELS};
 use consistency::{consistency, Votes};
 use hat::{run_bands, run_releasing, weight, Tables};
-use refine::{refine, Refine};
+use refine::Refine;
 
 pub use linear::{estimate_linear_noise, merge_linear, LinearMerged, LinearNoise, SAFE_FRACTION};
 pub use uncertainty::{standard_error, summarise as summarise_standard_error};
@@ -294,8 +294,8 @@ const RELEASE_BANDS: usize = 8;
 /// each band the frames' rows below it are given back, so the frames and the radiance are never
 /// both whole in memory — 9 × 12 MP peaks at about the frames' size (324 MB) instead of frames
 /// plus radiance (468 MB). Afterwards every frame's pixel buffer is empty (its size, name and
-/// exposure are kept). The noise-aware merge and the consistency test need every frame after
-/// the first pass, so with them the frames are merged whole and emptied at the end.
+/// exposure are kept). The consistency test reads every frame again after the merge, so with it
+/// the frames are merged whole and emptied at the end.
 pub fn merge_releasing(
     frames: &mut [Frame],
     response: &Response,
@@ -452,11 +452,23 @@ fn merge_codes<T: Code, const N: usize>(
     let g = |c: usize, v: usize| T::g(response, c, v);
     let luts = Tables::<N>::new(lt, |j, _c, z| weight(z, j, p, first_pass), g);
     let black = T::black(opts.black_level);
+    // The noise-aware merge refines each row right after the hat has merged it (one pass).
+    let refine = match (opts.weighting, &noise_est) {
+        (Weighting::Noise, Some(e)) => Some(Refine::<N>::new(
+            lt,
+            response,
+            &e.model,
+            opts.black_level,
+            g,
+        )),
+        _ => None,
+    };
     let (data, conf, clip) = outputs(out, opts, w, h);
-    // Without a second pass the rows can be given back as they are merged.
-    if let (Source::Releasing(frames), None) = (&mut source, &noise_est) {
-        let counts = run_releasing(frames, &luts, w, black, data, conf, clip);
-        finish(out, counts, None, 0, 0, None);
+    // Without the consistency test, which reads every frame again, the rows can be given back
+    // as they are merged.
+    if let (Source::Releasing(frames), false) = (&mut source, check) {
+        let counts = run_releasing(frames, &luts, refine.as_ref(), w, black, data, conf, clip);
+        finish(out, counts, noise_est, 0, 0, None);
         return;
     }
     let srcs: Vec<&[T]> = source
@@ -464,11 +476,7 @@ fn merge_codes<T: Code, const N: usize>(
         .iter()
         .filter_map(|f| T::samples(&f.pixels))
         .collect();
-    let counts = run_bands(&srcs, &luts, w, black, data, conf, clip);
-    if let (Weighting::Noise, Some(e)) = (opts.weighting, &noise_est) {
-        let r = Refine::<N>::new(lt, response, &e.model, opts.black_level, g);
-        refine(&srcs, &r, w, data);
-    }
+    let counts = run_bands(&srcs, &luts, refine.as_ref(), w, black, data, conf, clip);
     let mut flags = if check { vec![0u8; w * h] } else { Vec::new() };
     let (tested, flagged) = match &noise_est {
         Some(e) if check => {
