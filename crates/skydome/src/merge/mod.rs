@@ -46,6 +46,9 @@
 //! the `parallel` feature); the output is written once. [`merge_into`] reuses the output
 //! buffers of an earlier merge, which saves the page faults of a fresh allocation (≈ 18 ms of
 //! the ≈ 57 ms a 6 MP merge takes on a 2-core machine; see `benches/calibrate_merge.rs`).
+//! [`Weighting::Noise`] refines each row right after the hat has merged it, while the row's
+//! codes are in cache: one pass over the frames, its table indices and final `2^x` vector
+//! passes over the row, the three look-ups per vote (hat, vote, expected-code weight) scalar.
 
 mod consistency;
 mod hat;
@@ -107,8 +110,9 @@ pub enum Weighting {
     /// given the hat's first estimate (two passes, as Granados et al. 2010): a longer exposure,
     /// which collected more light, counts for more. Zero at the black level and 255, fading to
     /// zero over the top codes; a frame expected within 5 codes of clipping gets no weight. On
-    /// phone-like brackets about 30 % less error than the hat on the sky, at about 5× the hat's
-    /// merge time (6 MP: 133 ms against 23 ms on 2 cores, the noise model given). On the
+    /// phone-like brackets about 30 % less error than the hat on the sky, at about 3.6× the
+    /// hat's merge time with the noise model given and 4.2× with its fit from the frames (6 MP,
+    /// CPU time on 2 cores; each row is refined right after the hat has merged it). On the
     /// synthetic brackets of `tests/lib/oracle.rs` its error is 1.04–1.26× the oracle's (true
     /// curve and true noise) where the hat's is 1.37–2.45×. Not the default yet: its cost is
     /// above the 1.3× of the hat that issue 27 allows, and the noise fit reaches a bound on
