@@ -5,6 +5,7 @@
 #   scripts/bench.sh --quick    # the same, with a smaller scaling table (up to 24 MP)
 #   scripts/bench.sh --runs 9 --no-scaling
 #   scripts/bench.sh --batch    # only the station benchmark (issue #21), see below
+#   scripts/bench.sh --noise    # only the noise-model merge against the hat (issue #27), see below
 #
 # (1) `skydome merge A B C -o s.hdr --preview s.jpg` (calibration from the frames, preview on),
 # (2) the decode floor: the same three JPEGs decoded by libjpeg-turbo through Pillow, one thread,
@@ -22,6 +23,14 @@
 # captures" (525,600) in hours on this machine and on 10 and 100 such Slurm nodes, from the
 # measured cost per capture (ideal scaling: shards share nothing but the output folder).
 #
+# --noise: `skydome merge --weighting noise` against `--weighting hat` (the default), the same
+# bracket and options otherwise, alternating, $RUNS runs each, on 3 × 6 MP and 3 × 12 MP synthetic
+# brackets: median wall and CPU time of each whole process, their ratio, and the difference — the
+# noise merge's own cost (its noise-model fit and its refinement of the hat's estimate), since
+# everything else (decoding, calibration, writing) is the same work. The merge stage alone, with
+# nothing else in the process: `cargo bench -p skydome --bench calibrate_merge -- merge_6mp/noise`
+# against `merge_6mp/lut_into`.
+#
 # Needs python3 with venv, and /usr/bin/time (Debian: apt-get install time). The Python packages
 # (numpy, opencv-python-headless, Pillow) go into a virtual environment, $SKYDOME_BENCH_VENV or
 # target/bench-venv. Scratch files go to $SKYDOME_BENCH_DIR or target/bench. The machine should be
@@ -33,14 +42,16 @@ RUNS=5
 QUICK=0
 SCALING=1
 BATCH=0
+NOISE=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --quick) QUICK=1 ;;
     --runs) RUNS="$2"; shift ;;
     --no-scaling) SCALING=0 ;;
     --batch) BATCH=1 ;;
-    -h|--help) sed -n '2,28p' "$0"; exit 0 ;;
-    *) echo "bench.sh: unknown option $1 (use --quick, --runs N, --no-scaling, --batch)" >&2; exit 2 ;;
+    --noise) NOISE=1 ;;
+    -h|--help) sed -n '2,37p' "$0"; exit 0 ;;
+    *) echo "bench.sh: unknown option $1 (use --quick, --runs N, --no-scaling, --batch, --noise)" >&2; exit 2 ;;
   esac
   shift
 done
@@ -55,10 +66,13 @@ echo "building skydome (release)…" >&2
 cargo build --release -q -p skydome-cli
 SKYDOME="$PWD/target/release/skydome"
 
-if [ ! -x "$VENV/bin/python" ]; then
-  python3 -m venv "$VENV"
+# --noise compares skydome with itself: no Python packages.
+if [ "$NOISE" = 0 ]; then
+  if [ ! -x "$VENV/bin/python" ]; then
+    python3 -m venv "$VENV"
+  fi
+  "$VENV/bin/pip" install --quiet --disable-pip-version-check numpy opencv-python-headless Pillow
 fi
-"$VENV/bin/pip" install --quiet --disable-pip-version-check numpy opencv-python-headless Pillow
 PY="$VENV/bin/python"
 HELPER="$PWD/scripts/bench_helper.py"
 
@@ -81,6 +95,39 @@ timed() {
     echo "bench.sh: $name failed:" >&2; cat "$WORK/.stderr" >&2; exit 1; }
   cat "$WORK/.time" >> "$WORK/$name.txt"
 }
+
+# --- --noise: the noise-model merge against the hat (issue #27) ----------------------------------
+if [ "$NOISE" = 1 ]; then
+  rm -f "$WORK"/noise_*.txt
+  for size in 2448 3464; do
+    d="$WORK/bracket_${size}_3"
+    synth "$size" "-2,0,2" "$d"
+    echo "3 × ${size}²: $RUNS alternating runs of --weighting hat and --weighting noise…" >&2
+    for i in $(seq "$RUNS"); do
+      for wt in hat noise; do
+        # shellcheck disable=SC2046
+        timed "noise_${size}_$wt" "$SKYDOME" merge $(frames_of "$d") --times "$(times_of "$d")" \
+          --weighting "$wt" -o "$WORK/n.hdr" --force --quiet
+      done
+    done
+  done
+  python3 - "$WORK" <<'PY'
+import statistics, sys
+w = sys.argv[1]
+def med(name, col):
+    rows = [list(map(float, l.split())) for l in open(f"{w}/{name}.txt") if l.strip()]
+    if col == "cpu":
+        return statistics.median(r[2] + r[3] for r in rows), len(rows)
+    return statistics.median(r[0] for r in rows), len(rows)
+print(f"{'skydome merge, 3 frames':24} {'':5} {'hat':>9} {'noise':>9} {'noise/hat':>10} {'noise−hat':>10}")
+for size, mp in [(2448, "6 MP"), (3464, "12 MP")]:
+    for col in ("wall", "cpu"):
+        (h, n), (s, _) = med(f"noise_{size}_hat", col), med(f"noise_{size}_noise", col)
+        print(f"{'3 × ' + mp:24} {col:5} {h:8.3f}s {s:8.3f}s {s / h:10.3f} {1000 * (s - h):8.0f}ms")
+print(f"medians of {n} alternating runs each, whole processes (CPU = user + system, all threads)")
+PY
+  exit 0
+fi
 
 # --- --batch: the station benchmark (issue #21) ----------------------------------------------
 if [ "$BATCH" = 1 ]; then

@@ -7,6 +7,9 @@
 //!   same size (the floor); `merge_6mp/lut_into` and `merge_6mp/memory_floor_into`: the same
 //!   with the output buffer reused ([`merge_into`]), which spares the page faults;
 //!   `merge_6mp/lut_into_with_confidence_and_mask`: also the confidence and clipped mask;
+//!   `merge_6mp/noise_into`: the noise-model merge ([`Weighting::Noise`](skydome::merge::Weighting::Noise):
+//!   the noise model's fit from the frames, the hat pass and its refinement);
+//!   `merge_6mp/noise_given_into`: the same with the noise model given (no fit);
 //!   `merge_6mp/naive`: a straightforward per-pixel `ln`/`exp` weighted merge on one thread
 //!   (the peer a simple implementation gives).
 //!
@@ -145,6 +148,15 @@ fn merging(c: &mut Criterion) {
     let mut mn = merge(&frames, &r, &on).unwrap();
     g.bench_function("noise_into", |b| {
         b.iter(|| merge_into(black_box(&frames), &r, &on, &mut mn).unwrap())
+    });
+    // The same with the noise model given (a camera profile's): the refinement alone.
+    let og = MergeOptions {
+        noise: Some(skydome::noise::estimate(&frames, &r, 0, None).model),
+        ..on
+    };
+    let mut mg = merge(&frames, &r, &og).unwrap();
+    g.bench_function("noise_given_into", |b| {
+        b.iter(|| merge_into(black_box(&frames), &r, &og, &mut mg).unwrap())
     });
     g.bench_function("naive", |b| {
         b.iter(|| naive(black_box(&frames), &r, &mut out))

@@ -278,26 +278,34 @@ pub fn estimate(
     }
     let lt: Vec<f64> = frames.iter().map(|f| f.exposure.relative().ln()).collect();
     let (mut total, mut total_bins) = (0usize, 0usize);
-    let mut all_rows: [Vec<Row>; 3] = Default::default();
-    for (c, rows) in all_rows.iter_mut().enumerate() {
-        let g = response.curve(c);
-        let u: Vec<f64> = g.iter().map(|v| (-v).exp()).collect();
-        let s: Vec<f64> = (0..LEVELS).map(|z| slope(g, z).powi(2)).collect();
-        // Rows of the fit: regressors (Σu, Σu², Σs) and the measured variance, with a weight.
-        for j in 0..frames.len() - 1 {
-            let mut bins: Vec<Vec<(u8, u8)>> = vec![Vec::new(); BINS];
-            let (a, b) = (&frames[j].pixels, &frames[j + 1].pixels);
-            let mut p = 0;
-            while p < np {
-                if mask.is_none_or(|m| m[p]) {
+    // The code pairs of adjacent frames, binned by the shorter frame's code, per channel and
+    // frame pair: [c][j][bin], each bin in pixel order. One sweep over the strided pixels reads
+    // each pixel's cache line once for every channel and frame pair.
+    let pairs = frames.len() - 1;
+    let mut binned: [Vec<Bins>; 3] = std::array::from_fn(|_| vec![vec![Vec::new(); BINS]; pairs]);
+    let mut p = 0;
+    while p < np {
+        if mask.is_none_or(|m| m[p]) {
+            for (c, per_pair) in binned.iter_mut().enumerate() {
+                for (j, bins) in per_pair.iter_mut().enumerate() {
+                    let (a, b) = (&frames[j].pixels, &frames[j + 1].pixels);
                     let (z1, z2) = (code(a, 3 * p + c), code(b, 3 * p + c));
                     let (u1, u2) = (z1 as usize, z2 as usize);
                     if (lo..=hi).contains(&u1) && (lo..=hi).contains(&u2) {
                         bins[(u1 - lo) * BINS / (hi - lo + 1)].push((z1, z2));
                     }
                 }
-                p += stride;
             }
+        }
+        p += stride;
+    }
+    let mut all_rows: [Vec<Row>; 3] = Default::default();
+    for ((c, rows), per_pair) in all_rows.iter_mut().enumerate().zip(&binned) {
+        let g = response.curve(c);
+        let u: Vec<f64> = g.iter().map(|v| (-v).exp()).collect();
+        let s: Vec<f64> = (0..LEVELS).map(|z| slope(g, z).powi(2)).collect();
+        // Rows of the fit: regressors (Σu, Σu², Σs) and the measured variance, with a weight.
+        for (j, bins) in per_pair.iter().enumerate() {
             let dl = lt[j + 1] - lt[j];
             for bin in bins.iter().filter(|b| b.len() >= MIN_PER_BIN) {
                 let mut d: Vec<f64> = bin
@@ -392,6 +400,9 @@ pub(crate) fn median(v: &mut [f64]) -> f64 {
     v.select_nth_unstable_by(k, f64::total_cmp);
     v[k]
 }
+
+/// Code pairs `(z₁, z₂)` of two adjacent frames, one list per bin of `z₁`.
+type Bins = Vec<Vec<(u8, u8)>>;
 
 /// A row of the noise fit: regressors `(Σu, Σu², Σs)` averaged over a bin, the bin's measured
 /// variance, and the row's weight.

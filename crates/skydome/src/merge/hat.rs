@@ -1,6 +1,7 @@
 //! The hat merge: per-frame look-up tables of `(w, w · log2 E_j)`, summed a few frames at a
 //! time over bands of rows, then the clipped-pixel flags and the confidence of each row.
 
+use super::refine::{refine_row, Refine, Scratch};
 use super::{code_tables, fast_exp2, Code, Frame, Weighting};
 use super::{BLACK, CLIPPED_HIGH, CLIPPED_LOW, RELEASE_BANDS, ROWS_PER_BAND};
 
@@ -77,10 +78,13 @@ type Band<'a> = (usize, &'a mut [f32], &'a mut [f32], &'a mut [u8]);
 
 /// Merges all bands (in parallel with the `parallel` feature); returns the clipped-high,
 /// clipped-low and black pixel counts. `conf` and `clip` are empty when not asked for; a code
-/// at or below `black` counts as black.
+/// at or below `black` counts as black. With `refine` (the noise-aware merge) each row of the
+/// hat's estimate is refined as soon as it is merged.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn run_bands<T: Code, const N: usize>(
     srcs: &[&[T]],
     luts: &Tables<N>,
+    refine: Option<&Refine<N>>,
     w: usize,
     black: T,
     out: &mut [f32],
@@ -105,7 +109,7 @@ pub(super) fn run_bands<T: Code, const N: usize>(
         })
         .collect();
     debug_assert_eq!(jobs.len(), bands);
-    let work = |(off, o, c, m): Band<'_>| merge_band(srcs, luts, w, black, off, o, c, m);
+    let work = |(off, o, c, m): Band<'_>| merge_band(srcs, luts, refine, w, black, off, o, c, m);
     let add =
         |a: (usize, usize, usize), b: (usize, usize, usize)| (a.0 + b.0, a.1 + b.1, a.2 + b.2);
     #[cfg(feature = "parallel")]
@@ -119,9 +123,11 @@ pub(super) fn run_bands<T: Code, const N: usize>(
 
 /// [`run_bands`] over [`RELEASE_BANDS`] bands of rows from the bottom up, giving each band's
 /// frame rows back once it is merged (see [`merge_releasing`](super::merge_releasing)).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn run_releasing<T: Code, const N: usize>(
     frames: &mut [Frame],
     luts: &Tables<N>,
+    refine: Option<&Refine<N>>,
     w: usize,
     black: T,
     out: &mut [f32],
@@ -146,6 +152,7 @@ pub(super) fn run_releasing<T: Code, const N: usize>(
         let c = run_bands(
             &srcs,
             luts,
+            refine,
             w,
             black,
             &mut out[s0..s1],
@@ -287,6 +294,7 @@ fn accumulate_group<T: Code, const N: usize, const MODE: u8>(
 fn merge_band<T: Code, const N: usize>(
     srcs: &[&[T]],
     luts: &Tables<N>,
+    refine: Option<&Refine<N>>,
     w: usize,
     black: T,
     off: usize,
@@ -300,6 +308,7 @@ fn merge_band<T: Code, const N: usize>(
     let mut hs = vec![0u32; if conf.is_empty() { 0 } else { row }];
     let mut ext = vec![0u8; row];
     let mut rows: Vec<&[T]> = Vec::with_capacity(srcs.len());
+    let mut scratch = Scratch::default();
     let (mut high, mut low, mut blk) = (0usize, 0usize, 0usize);
     for (r, orow) in out.chunks_mut(row).enumerate() {
         let start = off + r * row;
@@ -341,6 +350,9 @@ fn merge_band<T: Code, const N: usize>(
         high += h;
         low += l;
         blk += b;
+        if let Some(r) = refine {
+            refine_row(&rows, r, &mut scratch, orow);
+        }
 
         if !conf.is_empty() {
             // Integer hat sums (`min(v, max − v)`, exact and vectorisable), then per pixel the

@@ -46,6 +46,9 @@
 //! the `parallel` feature); the output is written once. [`merge_into`] reuses the output
 //! buffers of an earlier merge, which saves the page faults of a fresh allocation (≈ 18 ms of
 //! the ≈ 57 ms a 6 MP merge takes on a 2-core machine; see `benches/calibrate_merge.rs`).
+//! [`Weighting::Noise`] refines each row right after the hat has merged it, while the row's
+//! codes are in cache: one pass over the frames, its table indices and final `2^x` vector
+//! passes over the row, the three look-ups per vote (hat, vote, expected-code weight) scalar.
 
 mod consistency;
 mod hat;
@@ -59,7 +62,7 @@ use crate::noise::{self, NoiseEstimate, NoiseModel};
 use crate::response::{Response, LEVELS};
 use consistency::{consistency, Votes};
 use hat::{run_bands, run_releasing, weight, Tables};
-use refine::{refine, Refine};
+use refine::Refine;
 
 pub use linear::{estimate_linear_noise, merge_linear, LinearMerged, LinearNoise, SAFE_FRACTION};
 pub use uncertainty::{standard_error, summarise as summarise_standard_error};
@@ -107,8 +110,9 @@ pub enum Weighting {
     /// given the hat's first estimate (two passes, as Granados et al. 2010): a longer exposure,
     /// which collected more light, counts for more. Zero at the black level and 255, fading to
     /// zero over the top codes; a frame expected within 5 codes of clipping gets no weight. On
-    /// phone-like brackets about 30 % less error than the hat on the sky, at about 5× the hat's
-    /// merge time (6 MP: 133 ms against 23 ms on 2 cores, the noise model given). On the
+    /// phone-like brackets about 30 % less error than the hat on the sky, at about 3.6× the
+    /// hat's merge time with the noise model given and 4.2× with its fit from the frames (6 MP,
+    /// CPU time on 2 cores; each row is refined right after the hat has merged it). On the
     /// synthetic brackets of `tests/lib/oracle.rs` its error is 1.04–1.26× the oracle's (true
     /// curve and true noise) where the hat's is 1.37–2.45×. Not the default yet: its cost is
     /// above the 1.3× of the hat that issue 27 allows, and the noise fit reaches a bound on
@@ -294,8 +298,8 @@ const RELEASE_BANDS: usize = 8;
 /// each band the frames' rows below it are given back, so the frames and the radiance are never
 /// both whole in memory — 9 × 12 MP peaks at about the frames' size (324 MB) instead of frames
 /// plus radiance (468 MB). Afterwards every frame's pixel buffer is empty (its size, name and
-/// exposure are kept). The noise-aware merge and the consistency test need every frame after
-/// the first pass, so with them the frames are merged whole and emptied at the end.
+/// exposure are kept). The consistency test reads every frame again after the merge, so with it
+/// the frames are merged whole and emptied at the end.
 pub fn merge_releasing(
     frames: &mut [Frame],
     response: &Response,
@@ -452,11 +456,23 @@ fn merge_codes<T: Code, const N: usize>(
     let g = |c: usize, v: usize| T::g(response, c, v);
     let luts = Tables::<N>::new(lt, |j, _c, z| weight(z, j, p, first_pass), g);
     let black = T::black(opts.black_level);
+    // The noise-aware merge refines each row right after the hat has merged it (one pass).
+    let refine = match (opts.weighting, &noise_est) {
+        (Weighting::Noise, Some(e)) => Some(Refine::<N>::new(
+            lt,
+            response,
+            &e.model,
+            opts.black_level,
+            g,
+        )),
+        _ => None,
+    };
     let (data, conf, clip) = outputs(out, opts, w, h);
-    // Without a second pass the rows can be given back as they are merged.
-    if let (Source::Releasing(frames), None) = (&mut source, &noise_est) {
-        let counts = run_releasing(frames, &luts, w, black, data, conf, clip);
-        finish(out, counts, None, 0, 0, None);
+    // Without the consistency test, which reads every frame again, the rows can be given back
+    // as they are merged.
+    if let (Source::Releasing(frames), false) = (&mut source, check) {
+        let counts = run_releasing(frames, &luts, refine.as_ref(), w, black, data, conf, clip);
+        finish(out, counts, noise_est, 0, 0, None);
         return;
     }
     let srcs: Vec<&[T]> = source
@@ -464,11 +480,7 @@ fn merge_codes<T: Code, const N: usize>(
         .iter()
         .filter_map(|f| T::samples(&f.pixels))
         .collect();
-    let counts = run_bands(&srcs, &luts, w, black, data, conf, clip);
-    if let (Weighting::Noise, Some(e)) = (opts.weighting, &noise_est) {
-        let r = Refine::<N>::new(lt, response, &e.model, opts.black_level, g);
-        refine(&srcs, &r, w, data);
-    }
+    let counts = run_bands(&srcs, &luts, refine.as_ref(), w, black, data, conf, clip);
     let mut flags = if check { vec![0u8; w * h] } else { Vec::new() };
     let (tested, flagged) = match &noise_est {
         Some(e) if check => {

@@ -2,7 +2,7 @@
 //! which re-weights every vote by the noise of the code its frame was expected to read.
 
 use super::consistency::LOWER_BOUND_CODE;
-use super::{code_tables, fast_exp2, fast_log2, Code, ROWS_PER_BAND};
+use super::{code_tables, fast_exp2, fast_log2, Code};
 use crate::noise::{self, NoiseModel};
 use crate::response::{Response, LEVELS};
 
@@ -26,21 +26,19 @@ pub(super) struct Refine<const N: usize> {
     votes: Vec<[f32; 2]>,
     /// `ln Δt_j · log2 e · EXPECTED_BINS_PER_STOP`: frame j's offset in bins.
     shift: Vec<f32>,
-    /// Per channel: `g · log2 e` of the first bin of `weights`.
+    /// Per channel: `g · log2 e` of the first bin of its weight table.
     lo: [f32; 3],
-    /// Per channel: the weight at expected `g · log2 e = lo + k / EXPECTED_BINS_PER_STOP`,
-    /// ending in a zero bin (expected beyond the usable codes).
-    weights: [Vec<f32>; 3],
+    /// The three channels' weight tables, one after the other: channel `c`'s, from
+    /// `start[c]`, holds the weight at expected `g · log2 e = lo[c] + k / EXPECTED_BINS_PER_STOP`
+    /// for `k = 0 ..= top[c]`, its last bin zero (expected beyond the usable codes).
+    flat: Vec<f32>,
+    /// Where each channel's weight table starts in `flat`.
+    start: [i32; 3],
+    /// Each channel's last bin (its table's length − 1), as `f32` for clamping bins.
+    top: [f32; 3],
 }
 
 impl<const N: usize> Refine<N> {
-    /// The weight of a vote expected `bin` bins above `lo[c]` in channel `c`.
-    #[inline(always)]
-    fn weight(&self, c: usize, bin: f32) -> f32 {
-        let t = self.weights[c].as_slice();
-        t[(bin.max(0.0) as usize).min(t.len() - 1)]
-    }
-
     pub(super) fn new(
         lt: &[f64],
         response: &Response,
@@ -91,91 +89,146 @@ impl<const N: usize> Refine<N> {
             w.push(0.0);
             w
         });
+        let mut flat = Vec::with_capacity(weights.iter().map(Vec::len).sum());
+        let (mut start, mut top) = ([0i32; 3], [0f32; 3]);
+        for (c, w) in weights.iter().enumerate() {
+            // At most 2^16 + 1 bins per channel: offsets and last bins are exact in i32 and f32.
+            start[c] = flat.len() as i32;
+            top[c] = (w.len() - 1) as f32;
+            flat.extend_from_slice(w);
+        }
         Self {
             votes,
+            flat,
+            start,
+            top,
             shift: lt
                 .iter()
                 .map(|l| (l * l2) as f32 * EXPECTED_BINS_PER_STOP)
                 .collect(),
             lo,
-            weights,
         }
     }
 }
 
-/// Runs [`Refine`] over the hat's estimate in `out` (in parallel with the `parallel` feature).
-pub(super) fn refine<T: Code, const N: usize>(
-    srcs: &[&[T]],
-    r: &Refine<N>,
-    w: usize,
-    out: &mut [f32],
-) {
-    let band = (3 * ROWS_PER_BAND * w).max(1);
-    let work = |(k, o): (usize, &mut [f32])| refine_band(srcs, r, k * band, o);
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        out.par_chunks_mut(band).enumerate().for_each(work);
-    }
-    #[cfg(not(feature = "parallel"))]
-    out.chunks_mut(band).enumerate().for_each(work);
+/// Row buffers of [`refine_row`], allocated once per band of rows.
+#[derive(Default)]
+pub(super) struct Scratch {
+    /// Per frame, then sample: the index of the vote's weight in [`Refine::flat`].
+    at: Vec<i32>,
+    /// Per sample: `Σ w · log2 E_j`.
+    num: Vec<f32>,
+    /// Per sample: `Σ w`.
+    den: Vec<f32>,
 }
 
-fn refine_band<T: Code, const N: usize>(
-    srcs: &[&[T]],
+/// Refines one row of the hat's estimate in `out` (`3 · width` samples, starting at a pixel's
+/// red sample), given that row of every frame in `rows`. The merge calls it on each row right
+/// after the hat pass, while the row's codes are still in cache.
+///
+/// Three passes over the row: the weight-table index of every vote (vector arithmetic), the
+/// look-ups and sums (scalar, one pixel's three channels at a time with the sums in
+/// registers), and the final `2^x` (vector arithmetic). Keeping the scalar look-ups apart
+/// from the vector passes, a row apart in time, avoids the store-to-load stalls of mixing
+/// scalar stores and vector loads on the same few values.
+pub(super) fn refine_row<T: Code, const N: usize>(
+    rows: &[&[T]],
     r: &Refine<N>,
-    start: usize,
+    scratch: &mut Scratch,
     out: &mut [f32],
 ) {
-    // Eight pixels at a time (a multiple of three samples, so the channel of each lane is
-    // fixed): the look-ups are scalar, the arithmetic around them vectorises.
-    const LANES: usize = 24;
+    let n = out.len();
+    let p = rows.len();
     let (tables, _) = r.votes.as_chunks::<N>();
+    let (frames, _) = tables.as_chunks::<3>();
+    let frames = &frames[..p];
+    scratch.at.resize(p * n, 0);
+    scratch.num.resize(n, 0.0);
+    scratch.den.resize(n, 0.0);
+    // 1. Per frame, the index of each vote's weight: the expected bin, clamped to its channel's
+    //    table, plus where that table starts. Eight pixels at a time (a multiple of three
+    //    samples, so each lane's channel is fixed), so it vectorises.
+    const LANES: usize = 24;
     let lo: [f32; LANES] = std::array::from_fn(|s| r.lo[s % 3]);
-    let mut blocks = out.chunks_exact_mut(LANES);
-    let mut i = start;
-    for o in blocks.by_ref() {
-        let o: &mut [f32; LANES] = o.try_into().unwrap_or_else(|_| unreachable!());
+    let top: [f32; LANES] = std::array::from_fn(|s| r.top[s % 3]);
+    let start: [i32; LANES] = std::array::from_fn(|s| r.start[s % 3]);
+    let (blocks, tail) = out.as_chunks::<LANES>();
+    let nb = blocks.len() * LANES;
+    for (b, o) in blocks.iter().enumerate() {
         let mut base = [0f32; LANES];
         for s in 0..LANES {
             base[s] = (fast_log2(o[s]) - lo[s]) * EXPECTED_BINS_PER_STOP;
         }
-        let (mut num, mut den) = ([0f32; LANES], [0f32; LANES]);
-        for (j, (src, shift)) in srcs.iter().zip(&r.shift).enumerate() {
-            let src = &src[i..i + LANES];
+        for (at, &shift) in scratch.at.chunks_exact_mut(n).zip(&r.shift) {
+            let at: &mut [i32; LANES] = match (&mut at[b * LANES..(b + 1) * LANES]).try_into() {
+                Ok(v) => v,
+                Err(_) => unreachable!("a block of LANES samples"),
+            };
             for s in 0..LANES {
-                let c = s % 3;
-                let [vote, f] = tables[j * 3 + c][src[s].index()];
-                let w = f * r.weight(c, base[s] + shift);
-                num[s] += w * vote;
-                den[s] += w;
+                at[s] = start[s] + floor_bin(base[s] + shift, top[s]);
             }
         }
-        for s in 0..LANES {
-            let e0 = o[s];
-            let v = fast_exp2(num[s] / den[s]);
-            o[s] = if den[s] > 0.0 && e0 > 0.0 && e0.is_finite() {
-                v
-            } else {
-                e0
-            };
-        }
-        i += LANES;
     }
-    for (k, o) in blocks.into_remainder().iter_mut().enumerate() {
-        let i = i + k;
-        let c = i % 3;
-        let e0 = *o;
-        let base = (fast_log2(e0) - r.lo[c]) * EXPECTED_BINS_PER_STOP;
-        let (mut num, mut den) = (0f32, 0f32);
-        for (j, (src, shift)) in srcs.iter().zip(&r.shift).enumerate() {
-            let [vote, f] = tables[j * 3 + c][src[i].index()];
-            let w = f * r.weight(c, base + shift);
-            num += w * vote;
-            den += w;
+    for (k, o) in tail.iter().enumerate() {
+        let c = (nb + k) % 3;
+        let base = (fast_log2(*o) - r.lo[c]) * EXPECTED_BINS_PER_STOP;
+        for (at, &shift) in scratch.at.chunks_exact_mut(n).zip(&r.shift) {
+            at[nb + k] = r.start[c] + floor_bin(base + shift, r.top[c]);
         }
-        if den > 0.0 && e0 > 0.0 && e0.is_finite() {
-            *o = fast_exp2(num / den);
+    }
+    // 2. The weighted sums.
+    let at = &scratch.at[..p * n];
+    let (num, den) = (&mut scratch.num[..n], &mut scratch.den[..n]);
+    for i in (0..n).step_by(3) {
+        let (mut nv, mut dv) = ([0f32; 3], [0f32; 3]);
+        for (j, (src, tab)) in rows.iter().zip(frames).enumerate() {
+            for c in 0..3 {
+                let [vote, f] = tab[c][src[i + c].index()];
+                let w = f * r.flat[at[j * n + i + c] as usize];
+                nv[c] += w * vote;
+                dv[c] += w;
+            }
         }
+        num[i..i + 3].copy_from_slice(&nv);
+        den[i..i + 3].copy_from_slice(&dv);
+    }
+    // 3. The refined value where some frame could vote, else the hat's.
+    let (ob, ot) = out.as_chunks_mut::<LANES>();
+    let (nb, nt) = num.as_chunks::<LANES>();
+    let (db, dt) = den.as_chunks::<LANES>();
+    for ((o, nv), dv) in ob.iter_mut().zip(nb).zip(db) {
+        for s in 0..LANES {
+            o[s] = refined(o[s], nv[s], dv[s]);
+        }
+    }
+    for ((o, &nv), &dv) in ot.iter_mut().zip(nt).zip(dt) {
+        *o = refined(*o, nv, dv);
+    }
+}
+
+/// `⌊x⌋` of `x` clamped to `0 ..= top` (`top` a whole number below 2²²; NaN gives 0), by
+/// arithmetic that vectorises: adding 2²³ rounds to the nearest whole number in the low bits
+/// of the sum, and one compare corrects a round-up. (`x as i32` saturates, which takes the
+/// compiler a scalar conversion and two branches per sample.)
+#[inline(always)]
+fn floor_bin(x: f32, top: f32) -> i32 {
+    const BIAS: f32 = 8_388_608.0; // 2²³
+    let x = if x > 0.0 { x } else { 0.0 };
+    let x = if x < top { x } else { top };
+    let t = x + BIAS;
+    let rounded = t.to_bits() as i32 - BIAS.to_bits() as i32;
+    rounded - ((t - BIAS) > x) as i32
+}
+
+/// The refined value `2^(num / den)` where some frame could vote (`den > 0`) and the hat's
+/// estimate `e0` is positive and finite, else `e0`.
+#[inline(always)]
+fn refined(e0: f32, num: f32, den: f32) -> f32 {
+    let v = fast_exp2(num / den);
+    let finite = (e0.to_bits() & 0x7fff_ffff) < 0x7f80_0000;
+    if (den > 0.0) & (e0 > 0.0) & finite {
+        v
+    } else {
+        e0
     }
 }

@@ -338,8 +338,9 @@ fn hand_held_bracket_merges_loosely() {
 
 /// `merge_releasing` gives the frames' rows back as it goes and returns exactly what `merge`
 /// does: 8- and 16-bit, a height that does not split evenly into its bands, with the
-/// confidence and the clipped mask; with the noise weighting and the consistency test, which
-/// merge whole. The frames keep their size and exposure and lose their pixels.
+/// confidence and the clipped mask; with the noise weighting (refined row by row, so it gives
+/// rows back too) and with the consistency test, which merges whole. The frames keep their size
+/// and exposure and lose their pixels.
 #[test]
 fn merge_releasing_equals_merge_and_empties_the_frames() {
     let b = generate(&SynthOptions {
@@ -353,6 +354,12 @@ fn merge_releasing_equals_merge_and_empties_the_frames() {
     for frames in [&b.frames, &f16] {
         for o in [
             MergeOptions {
+                confidence: true,
+                clipped_mask: true,
+                ..Default::default()
+            },
+            MergeOptions {
+                weighting: Weighting::Noise,
                 confidence: true,
                 clipped_mask: true,
                 ..Default::default()
