@@ -30,6 +30,8 @@
 //! CI renders 7 scenes (about a minute and a half on 2 cores); the cache makes reruns free.
 
 use crate::common;
+
+mod absolute_day;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
