@@ -249,7 +249,7 @@ fn a_profiles_constant_needs_exif_exposure_data() {
         absolute: AbsoluteMode::Exif,
         ..Options::default()
     };
-    let e = run(no_iso, &exif).err().expect("refused");
+    let e = run(no_iso, &exif).expect_err("refused");
     assert!(e.to_string().contains("have no ISO speed"), "{e}");
     // A reading on such frames makes the dome absolute but gives no constant, and says why.
     let mut no_n = frames.clone();
