@@ -104,13 +104,6 @@ pub const FROM_PROFILE: &str = "camera profile";
 /// [`PhotometryReport::from`] of a scale from the reflected-light meter equation.
 pub const FROM_METER_EQUATION: &str = "exif meter equation";
 
-impl PhotometryReport {
-    /// True when a meter reading (luminance or illuminance) set the scale.
-    pub fn from_reading(&self) -> bool {
-        matches!(self.from, "luminance" | "illuminance")
-    }
-}
-
 fn positive(what: &'static str, value: f64) -> Result<f64, PhotometryError> {
     match value.is_finite() && value > 0.0 {
         true => Ok(value),

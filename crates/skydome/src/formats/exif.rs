@@ -218,7 +218,7 @@ mod tests {
         assert_eq!(text(Tag::OffsetTimeOriginal), "\"+02:00\"");
         assert_eq!(text(Tag::GPSLongitudeRef), "W");
         assert_eq!(text(Tag::PhotographicSensitivity), "64");
-        assert_eq!(text(Tag::FNumber), "f/1.8");
+        assert_eq!(text(Tag::FNumber), "1.8");
         assert!(insert_into_jpeg(b"PNG", &f).is_err());
         assert!(ascii(1, "x", "é").is_err());
     }
