@@ -83,6 +83,11 @@ pub struct Args {
     /// A camera profile from `skydome calibrate`; without one, every capture calibrates itself.
     #[arg(long, value_name = "camera.json")]
     pub profile: Option<PathBuf>,
+    /// Where each dome's absolute scale comes from: `profile` (the profile's absolute constant,
+    /// made by `skydome merge --illuminance LUX --save-profile`, with each capture's EXIF time,
+    /// ISO and f-number; default), `exif` (the meter equation, ±30 %) or `none`.
+    #[arg(long, default_value = "profile", value_parser = crate::merge::parse_absolute)]
+    pub absolute: skydome::pipeline::AbsoluteMode,
     /// Frame weighting: hat, noise or none (as `skydome merge`).
     #[arg(long, default_value = "hat", value_parser = parse_weighting)]
     pub weighting: Weighting,
@@ -231,7 +236,6 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         out: &out,
         options: &options,
         fingerprint: &fingerprint,
-        tz_given: tz.is_some(),
         orientation: a.orientation,
         max_pixels: a.max_pixels,
     };
@@ -479,7 +483,12 @@ fn options(a: &Args) -> Result<Options> {
         consistency: false,
         ghosts: a.ghosts,
         lens: a.geometry.lens_source(a.calib.circle)?,
-        sky: a.geometry.sky(),
+        // Each capture's clock is read in the given zone by the pipeline itself (its report
+        // then says the time came from EXIF and the flag).
+        sky: pipeline::SkyOptions {
+            time_zone: a.time_zone.clone(),
+            ..a.geometry.sky()
+        },
         products: a.geometry.products(
             Products {
                 preview: a.preview,
@@ -490,6 +499,7 @@ fn options(a: &Args) -> Result<Options> {
             a.equirect,
         ),
         reference: Default::default(),
+        absolute: a.absolute,
     })
 }
 
@@ -746,7 +756,6 @@ struct Ctx<'a> {
     out: &'a Path,
     options: &'a Options,
     fingerprint: &'a str,
-    tz_given: bool,
     orientation: OrientationPolicy,
     max_pixels: u64,
 }
@@ -959,31 +968,9 @@ fn merge(ctx: &Ctx, c: &Capture) -> std::result::Result<(pipeline::Dome, usize),
             max_pixels: ctx.max_pixels,
         },
     };
-    let mut options = ctx.options.clone();
-    if ctx.tz_given {
-        // The camera's clock read with the given offset; EXIF's own offset is not used.
-        options.sky.time = c.utc.map(|t| {
-            format!(
-                "{:04}-{:02}-{:02}T{:02}:{:02}:{:02}{}",
-                t.year(),
-                u8::from(t.month()),
-                t.day(),
-                t.hour(),
-                t.minute(),
-                t.second(),
-                offset_text(t.offset())
-            )
-        });
-    }
-    let dome = pipeline::run(input, &options, &mut pipeline::no_progress)
+    let dome = pipeline::run(input, ctx.options, &mut pipeline::no_progress)
         .map_err(|e| format!("{:#}", io::hint(e)))?;
     Ok((dome, pixels))
-}
-
-fn offset_text(o: time::UtcOffset) -> String {
-    let (h, m, _) = o.as_hms();
-    let sign = if o.is_negative() { '-' } else { '+' };
-    format!("{sign}{:02}:{:02}", h.unsigned_abs(), m.unsigned_abs())
 }
 
 /// Writes the capture's files atomically into OUT; returns their names relative to OUT, the

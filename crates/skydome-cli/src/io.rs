@@ -98,6 +98,9 @@ pub fn hint(e: PipelineError) -> anyhow::Error {
         PipelineError::CircleNotFound { .. } => " with --circle CX,CY,R",
         PipelineError::NoEphemeris => " (--time, --lat, --lon)",
         PipelineError::NeedsLens(_) => " (--lens lens.json or --fisheye)",
+        PipelineError::AbsoluteExif(_) => {
+            "; give a meter reading (--illuminance, --luminance) or leave out --absolute exif"
+        }
         _ => "",
     };
     anyhow!("{e}{extra}")

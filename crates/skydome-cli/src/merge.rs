@@ -8,7 +8,9 @@ use skydome::camera::CameraProfile;
 use skydome::image::PixelPoint;
 use skydome::merge::Weighting;
 use skydome::photometry::{Reference, SpotLuminance};
-use skydome::pipeline::{self, Dome, Options, Products, Report, ResponseSource, SkyOptions};
+use skydome::pipeline::{
+    self, AbsoluteMode, Dome, Options, Products, Report, ResponseSource, SkyOptions,
+};
 
 use crate::calibrate::CalibArgs;
 use crate::geometry::{GeometryArgs, MapOutputs};
@@ -26,6 +28,18 @@ pub struct Args {
     /// A camera profile from `skydome calibrate`; without one, the bracket calibrates itself.
     #[arg(long, value_name = "camera.json")]
     pub profile: Option<PathBuf>,
+    /// Write the camera profile: the response calibrated on this bracket (or the --profile
+    /// given) and, when --illuminance, --luminance or --absolute exif made the dome absolute,
+    /// the camera's absolute constant, so that every later merge with this profile and EXIF
+    /// time, ISO and f-number is absolute without a meter.
+    #[arg(long, value_name = "camera.json")]
+    pub save_profile: Option<PathBuf>,
+    /// Where the absolute scale comes from without a meter reading: `profile` (the profile's
+    /// absolute constant with EXIF time, ISO and f-number, when it has one; default), `exif`
+    /// (the reflected-light meter equation, K = 12.5: an estimate within ±30 %, labelled so) or
+    /// `none` (relative).
+    #[arg(long, default_value = "profile", value_parser = parse_absolute)]
+    pub absolute: AbsoluteMode,
     /// Also write an OpenEXR file.
     #[arg(long, value_name = "FILE.exr")]
     pub exr: Option<PathBuf>,
@@ -97,6 +111,11 @@ fn parse_weighting(s: &str) -> Result<Weighting, String> {
     s.parse().map_err(|e: skydome::UnknownName| e.to_string())
 }
 
+/// Parses an absolute mode name.
+pub fn parse_absolute(s: &str) -> Result<AbsoluteMode, String> {
+    s.parse().map_err(|e: skydome::UnknownName| e.to_string())
+}
+
 /// Parses `X,Y=CD`.
 fn parse_spot(s: &str) -> Result<(f64, f64, f64), String> {
     let bad = || format!("'{s}': expected X,Y=CD (pixel, then luminance in cd/m²)");
@@ -126,9 +145,12 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     .into_iter()
     .flatten()
     .chain(a.maps.outputs())
+    .chain(a.save_profile.as_ref())
     .collect();
+    // The profile read is an input too: an updated profile goes to a new file.
+    let inputs: Vec<PathBuf> = a.images.iter().chain(a.profile.as_ref()).cloned().collect();
     for o in &outs {
-        io::check_destination(o, &a.images, a.force)?;
+        io::check_destination(o, &inputs, a.force)?;
     }
     let options = options(&a)?;
     let input = a.bracket.input(&a.images)?;
@@ -141,7 +163,11 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     for w in &dome.report.warnings {
         io::warn(quiet, w);
     }
-    let written = encode(&a, &dome)?.commit(&a.images, a.force)?;
+    let mut outputs = encode(&a, &dome)?;
+    if let Some(p) = &a.save_profile {
+        outputs.add(p, profile_to_save(&a, &dome)?.to_json().into_bytes());
+    }
+    let written = outputs.commit(&inputs, a.force)?;
     let written: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     if a.json {
         let s = Summary {
@@ -193,7 +219,25 @@ fn options(a: &Args) -> Result<Options> {
             }),
             illuminance_lux: a.illuminance,
         },
+        absolute: a.absolute,
     })
+}
+
+/// The profile `--save-profile` writes, or why there is none (before anything is written).
+fn profile_to_save(a: &Args, dome: &Dome) -> Result<CameraProfile> {
+    let what = a
+        .save_profile
+        .as_ref()
+        .map_or(String::new(), |p| p.display().to_string());
+    if let Some(why) = &dome.absolute_constant_refused {
+        anyhow::bail!("{what}: cannot store the camera's absolute constant: {why}");
+    }
+    match &dome.camera_profile {
+        Some(p) => Ok(p.clone()),
+        None => anyhow::bail!(
+            "{what}: with --profile, --save-profile stores a new absolute constant: give --illuminance, --luminance or --absolute exif"
+        ),
+    }
 }
 
 /// Reads and validates a camera profile (JSON).
@@ -322,10 +366,17 @@ fn print_summary(r: &Report, written: &[String]) {
         }
     }
     if let Some(p) = &r.photometry {
-        let mut s = format!(
-            "absolute: scaled by {:.6e} from the {} reading",
-            p.scale, p.from
-        );
+        let source = match p.from {
+            skydome::photometry::FROM_PROFILE => "the camera profile's constant".to_string(),
+            skydome::photometry::FROM_METER_EQUATION => {
+                "EXIF by the meter equation (K = 12.5)".to_string()
+            }
+            reading => format!("the {reading} reading"),
+        };
+        let mut s = format!("absolute: scaled by {:.6e} from {source}", p.scale);
+        if let Some(u) = p.uncertainty_percent {
+            s += &format!(" (±{u:.0} %)");
+        }
         if let Some(e) = p.horizontal_illuminance_lux {
             s += &format!("; horizontal illuminance {e:.0} lx");
         }

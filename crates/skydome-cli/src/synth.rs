@@ -47,6 +47,12 @@ pub struct Args {
     /// Latitude,longitude written as EXIF GPS, with --captures.
     #[arg(long, value_name = "LAT,LON", allow_hyphen_values = true)]
     pub gps: Option<String>,
+    /// ISO speed written as EXIF, with --captures (a camera whose frames carry it).
+    #[arg(long, value_name = "ISO")]
+    pub iso: Option<f64>,
+    /// Aperture f-number written as EXIF, with --captures.
+    #[arg(long, value_name = "N")]
+    pub f_number: Option<f64>,
     /// Replace existing files.
     #[arg(long)]
     pub force: bool,
@@ -183,6 +189,8 @@ fn day(a: &Args, opts: &SynthOptions, n: usize, quiet: bool) -> Result<()> {
                 subsec_original: None,
                 offset_time_original: Some(offset.clone()),
                 gps_deg: gps,
+                iso: a.iso,
+                f_number: a.f_number,
             };
             let jpeg = insert_into_jpeg(&encode_jpeg(&img, 98)?, &fields).context("EXIF")?;
             out.add(&a.output.join(format!("IMG_{k:04}.jpg")), jpeg);

@@ -28,6 +28,8 @@ pub use crate::response::PROFILE_VERSION;
 ///   `g(128) = 0` for calibrated curves.
 /// - `lambda`, `weighting`, `samples` (used), `seed`: how it was made.
 /// - `make`, `model`, `iso`, `date`: where it came from (free text; `date` as the CLI writes it).
+/// - `absolute` (optional, see [`AbsoluteConstant`]): the camera's absolute constant, which
+///   makes every later merge with this profile absolute from EXIF exposure data alone.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CameraProfile {
     /// Format version ([`PROFILE_VERSION`]).
@@ -58,6 +60,82 @@ pub struct CameraProfile {
     /// estimates it from the bracket.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise: Option<Box<NoiseModel>>,
+    /// The camera's absolute constant, when it was measured (a meter reading) or estimated
+    /// (the reflected-light meter equation). Optional: profiles without it load as before and
+    /// their merges stay relative.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub absolute: Option<AbsoluteConstant>,
+}
+
+/// How a camera's [`AbsoluteConstant`] was found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AbsoluteFrom {
+    /// A horizontal illuminance reading beside the camera (lux).
+    Illuminance,
+    /// A spot luminance reading (cd/m²).
+    Luminance,
+    /// The reflected-light meter equation `L = K·N²/(t·S)` with `K` =
+    /// [`METER_CONSTANT_K`] (no meter; ±[`METER_EQUATION_UNCERTAINTY_PERCENT`] %).
+    Exif,
+}
+
+crate::named_enum!(AbsoluteFrom, "absolute constant source", [
+    Illuminance => "illuminance",
+    Luminance => "luminance",
+    Exif => "exif"
+]);
+
+/// The reflected-light meter calibration constant `K` of ISO 2720, cd·s/m² per ISO: a meter
+/// reading luminance `L` sets `t·S/N² = K/L`, which a camera renders as mid-grey.
+pub const METER_CONSTANT_K: f64 = 12.5;
+
+/// The uncertainty, percent, of a constant estimated from [`METER_CONSTANT_K`]: cameras place
+/// mid-grey differently (K from 10.6 to 13.4 between makers, exposure compensation in the tone
+/// curve, ISO ratings within ⅓ stop).
+pub const METER_EQUATION_UNCERTAINTY_PERCENT: f64 = 30.0;
+
+/// The 8-bit code a camera's JPEG gives mid-grey: 118, where ISO 12232's standard output
+/// sensitivity puts an 18 % grey (0.461 of full scale in sRGB).
+pub const MID_GREY_CODE: u8 = 118;
+
+/// The camera's absolute constant: Radiance radiance (W·sr⁻¹·m⁻², Radiance's RGB; luminance =
+/// 179 × (0.265 R + 0.670 G + 0.065 B) cd/m²) per unit of the merge's relative radiance, the
+/// merge having divided every frame by its relative exposure `t·(ISO/100)/N²` (time in s, ISO
+/// speed, f-number, from EXIF). It belongs to this profile's response curves: the merge's
+/// relative radiance is defined by them.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AbsoluteConstant {
+    /// W·sr⁻¹·m⁻² per unit of relative radiance at `t·(ISO/100)/N²` = 1 s (finite, > 0).
+    pub radiance_per_unit: f64,
+    /// How it was found.
+    pub from: AbsoluteFrom,
+    /// Its stated uncertainty, percent, when it is an estimate (the meter equation's 30).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty_percent: Option<f64>,
+    /// The capture it was found on (EXIF DateTimeOriginal), when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub date: Option<String>,
+}
+
+impl AbsoluteConstant {
+    /// The constant the reflected-light meter equation gives a camera of response `response`:
+    /// a frame at `t`, ISO `S`, f-number `N` renders the luminance `K·N²/(t·S)` as
+    /// [`MID_GREY_CODE`] in every channel, so its relative radiance there is
+    /// `exp g(118) / (t·S/100/N²)` and the constant is `(K/100) / (179 · Y(exp g(118)))`,
+    /// whatever the frame's settings. `None` when the curve gives no positive luminance.
+    pub fn from_meter_equation(response: &Response) -> Option<Self> {
+        let z = MID_GREY_CODE as usize;
+        let rgb = [0, 1, 2].map(|c| response.curve(c)[z].exp());
+        let y = crate::image::radiance_luminance(rgb);
+        let k = METER_CONSTANT_K / 100.0 / y;
+        (k.is_finite() && k > 0.0).then_some(Self {
+            radiance_per_unit: k,
+            from: AbsoluteFrom::Exif,
+            uncertainty_percent: Some(METER_EQUATION_UNCERTAINTY_PERCENT),
+            date: None,
+        })
+    }
 }
 
 impl CameraProfile {
@@ -76,6 +154,7 @@ impl CameraProfile {
             iso: None,
             date: None,
             noise: None,
+            absolute: None,
         }
     }
 
@@ -95,6 +174,7 @@ impl CameraProfile {
             iso: None,
             date: None,
             noise: None,
+            absolute: None,
         }
     }
 
@@ -128,6 +208,14 @@ impl CameraProfile {
                 "profile lambda {} is not a non-negative number",
                 p.lambda
             )));
+        }
+        if let Some(a) = &p.absolute {
+            let k = a.radiance_per_unit;
+            if !(k.is_finite() && k > 0.0) {
+                return Err(ResponseError::BadOption(format!(
+                    "profile absolute constant {k} is not a positive number"
+                )));
+            }
         }
         Ok(p)
     }

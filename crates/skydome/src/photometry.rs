@@ -80,7 +80,9 @@ pub enum PhotometryError {
 pub struct PhotometryReport {
     /// The factor the relative radiance was multiplied by.
     pub scale: f64,
-    /// "luminance" or "illuminance": the reading that set the scale.
+    /// What set the scale: "luminance" or "illuminance" (a reading), [`FROM_PROFILE`] (the
+    /// camera profile's absolute constant with EXIF time, ISO and f-number) or
+    /// [`FROM_METER_EQUATION`] (the reflected-light meter equation on EXIF, an estimate).
     pub from: &'static str,
     /// The metered patch's luminance after scaling, cd/m² (equals the reading when it set the
     /// scale).
@@ -90,7 +92,17 @@ pub struct PhotometryReport {
     /// With both readings: (dome's illuminance after the luminance scale) / (measured
     /// illuminance) − 1, in percent.
     pub disagreement_percent: Option<f64>,
+    /// The stated uncertainty of the scale, percent, when it is an estimate (±30 for the
+    /// meter equation, or the profile's constant's own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty_percent: Option<f64>,
 }
+
+/// [`PhotometryReport::from`] of a scale from the camera profile's absolute constant.
+pub const FROM_PROFILE: &str = "camera profile";
+
+/// [`PhotometryReport::from`] of a scale from the reflected-light meter equation.
+pub const FROM_METER_EQUATION: &str = "exif meter equation";
 
 fn positive(what: &'static str, value: f64) -> Result<f64, PhotometryError> {
     match value.is_finite() && value > 0.0 {
@@ -170,6 +182,7 @@ pub fn absolute_scale(
             (Some(kl), Some(ki)) => Some(100.0 * (kl / ki - 1.0)),
             _ => None,
         },
+        uncertainty_percent: None,
     })
 }
 

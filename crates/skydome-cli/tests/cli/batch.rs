@@ -400,3 +400,36 @@ fn manifest_and_frames_per_capture_group_cameras_without_exif() {
     assert_eq!(rows.len(), 2);
     assert!(column(&rows, "status")[0].contains("exposure"), "{rows:?}");
 }
+
+/// `--time-zone` reaches every capture: the camera's clock (EXIF says +02:00) read as UTC−05:00,
+/// so 06:00 local is 11:00 UTC, in the table, each capture's report (time from EXIF and the
+/// flag) and each dome's `GMT=` line.
+#[test]
+fn the_time_zone_reaches_every_capture() {
+    let photos = tempfile::tempdir().unwrap();
+    day(photos.path(), 2, 64);
+    let out = tempfile::tempdir().unwrap();
+    let o = batch(&[photos.path()], out.path(), &["--time-zone", "-05:00"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let rows = csv(out.path());
+    assert_eq!(
+        column(&rows, "capture_time_utc"),
+        ["2026-06-21T11:00:00Z", "2026-06-21T12:00:00Z"]
+    );
+    let lines = std::fs::read_to_string(out.path().join("captures.jsonl")).unwrap();
+    for (l, hour) in lines.lines().zip([11, 12]) {
+        let v: serde_json::Value = serde_json::from_str(l).unwrap();
+        let c = &v["report"]["capture"];
+        assert_eq!(c["time_from"], "exif+flag", "{l}");
+        // The bracket's own clock (its frames are 1 s apart), read in the given zone.
+        let utc = c["time_utc"].as_str().unwrap();
+        assert!(utc.starts_with(&format!("2026-06-21T{hour}:00:0")), "{l}");
+        let dome = out.path().join(v["output"].as_str().unwrap());
+        let head = std::fs::read(&dome).unwrap();
+        let head = String::from_utf8_lossy(&head[..head.len().min(2000)]).to_string();
+        assert!(
+            head.contains(&format!("GMT=2026:06:21 {hour}:00:0")),
+            "{head}"
+        );
+    }
+}

@@ -5,6 +5,7 @@
 #[path = "../../../skydome/tests/common/mod.rs"]
 mod common;
 
+mod absolute;
 mod bad_input;
 mod batch;
 mod batch_slurm;

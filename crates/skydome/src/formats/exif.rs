@@ -31,6 +31,10 @@ pub struct ExifFields {
     pub offset_time_original: Option<String>,
     /// Latitude and longitude, degrees (north and east positive).
     pub gps_deg: Option<(f64, f64)>,
+    /// ISO speed (`PhotographicSensitivity`, a whole number 1..=65535).
+    pub iso: Option<f64>,
+    /// Aperture f-number (`FNumber`, written in 1/100).
+    pub f_number: Option<f64>,
 }
 
 /// Errors of [`insert_into_jpeg`].
@@ -102,6 +106,20 @@ pub fn encode_tiff(f: &ExifFields) -> Result<Vec<u8>, ExifWriteError> {
     let mut exif = Vec::new();
     if let Some(t) = f.exposure_time_s.filter(|t| t.is_finite() && *t > 0.0) {
         exif.push(rationals(0x829A, &[time_rational(t)]));
+    }
+    if let Some(n) = f
+        .f_number
+        .filter(|n| n.is_finite() && *n > 0.0 && *n < 10_000.0)
+    {
+        exif.push(rationals(0x829D, &[((n * 100.0).round() as u32, 100)]));
+    }
+    if let Some(iso) = f.iso.filter(|s| s.is_finite() && *s >= 1.0) {
+        exif.push(Entry {
+            tag: 0x8827,
+            kind: SHORT,
+            count: 1,
+            data: (iso.round().min(65535.0) as u16).to_le_bytes().to_vec(),
+        });
     }
     exif.push(Entry {
         tag: 0x9000,
@@ -182,6 +200,8 @@ mod tests {
             subsec_original: Some("25".into()),
             offset_time_original: Some("+02:00".into()),
             gps_deg: Some((47.5, -8.25)),
+            iso: Some(64.0),
+            f_number: Some(1.8),
         };
         let ex = ::exif::Reader::new()
             .read_raw(encode_tiff(&f).unwrap())
@@ -197,6 +217,8 @@ mod tests {
         assert_eq!(text(Tag::SubSecTimeOriginal), "\"25\"");
         assert_eq!(text(Tag::OffsetTimeOriginal), "\"+02:00\"");
         assert_eq!(text(Tag::GPSLongitudeRef), "W");
+        assert_eq!(text(Tag::PhotographicSensitivity), "64");
+        assert_eq!(text(Tag::FNumber), "1.8");
         assert!(insert_into_jpeg(b"PNG", &f).is_err());
         assert!(ascii(1, "x", "é").is_err());
     }

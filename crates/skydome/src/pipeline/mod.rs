@@ -22,6 +22,7 @@
 //!
 //! See the crate documentation for a complete example.
 
+mod absolute;
 mod capture;
 mod options;
 mod progress;
@@ -50,8 +51,8 @@ use crate::tonemap::{self, ToneMap, TonemapError};
 
 pub use capture::{CaptureReport, Provenance};
 pub use options::{
-    default_equirect_width, EncodedFrame, EquirectOptions, Frames, Input, LensSource, Options,
-    Products, ResponseSource, SkyOptions, SunDisc, SunMode,
+    default_equirect_width, AbsoluteMode, EncodedFrame, EquirectOptions, Frames, Input, LensSource,
+    Options, Products, ResponseSource, SkyOptions, SunDisc, SunMode,
 };
 use progress::Reporter;
 pub use progress::{no_progress, Progress, Stage};
@@ -117,6 +118,10 @@ pub enum PipelineError {
     /// Drawing the confidence picture failed.
     #[error("{0}")]
     Plot(#[from] crate::plot::PlotError),
+    /// An absolute dome from the reflected-light meter equation was asked for, and the
+    /// bracket cannot give one (the reason names the frames and what they lack).
+    #[error("an absolute dome from EXIF (the meter equation): {0}")]
+    AbsoluteExif(String),
     /// The progress callback asked to stop.
     #[error("cancelled")]
     Cancelled,
@@ -141,6 +146,8 @@ pub fn run(
         Some(_) => linear_response(),
         None => response_stage(options, &br, lens_circle, &mut progress)?,
     };
+    let (constant, absolute_warnings) =
+        absolute::scale_without_reading(options, &br, &calibrated.response, raw.is_some())?;
     let MergeOutcome {
         mut merged,
         inconsistent_fraction,
@@ -166,7 +173,15 @@ pub fn run(
         image: radiance,
         photometry,
         sky,
-    } = sky_stage::run(options, &br, lens, merged_radiance, clipped, &mut progress)?;
+    } = sky_stage::run(
+        options,
+        &br,
+        lens,
+        merged_radiance,
+        clipped,
+        constant.as_ref(),
+        &mut progress,
+    )?;
     let capture = capture::resolve(options, &br)?;
     let meta = dome_meta(&capture, photometry.as_ref(), sky.as_ref());
     let marks = sky.as_ref().map(|s| s.marks);
@@ -195,6 +210,7 @@ pub fn run(
     let warnings = [
         br.warnings.clone(),
         calibrated.warnings,
+        absolute_warnings,
         merge_warnings,
         standard_error
             .as_ref()
@@ -228,10 +244,25 @@ pub fn run(
         warnings,
     };
     // The profile made by calibrating carries the noise model the merge fitted.
-    let camera_profile = calibrated.profile.map(|mut prof| {
+    let mut camera_profile = calibrated.profile.map(|mut prof| {
         prof.noise = merged.noise.filter(|n| n.fitted).map(|n| Box::new(n.model));
         prof
     });
+    // A reading (or the meter equation) made this dome absolute: the camera's constant goes
+    // into its profile (the given one, when the response came from a profile).
+    let (absolute_constant, absolute_constant_refused) =
+        match absolute::constant_for_profile(&br, raw.is_some(), report.photometry.as_ref()) {
+            Ok(c) => (c, None),
+            Err(why) => (None, Some(why)),
+        };
+    if let Some(c) = absolute_constant {
+        if let ResponseSource::Profile(given) = &options.response {
+            camera_profile = Some(given.clone());
+        }
+        if let Some(p) = camera_profile.as_mut() {
+            p.absolute = Some(c);
+        }
+    }
     Ok(Dome {
         radiance,
         meta,
@@ -244,6 +275,7 @@ pub fn run(
         standard_error: sigma,
         consistency: pictures.consistency,
         camera_profile,
+        absolute_constant_refused,
         lens_profile,
         report,
     })
@@ -622,12 +654,24 @@ pub fn describe_camera(profile: &mut CameraProfile, br: &Bracket) {
 /// significant digits: the WebAssembly build's maths library differs from the native one in the
 /// last bits, and the app must write the CLI's bytes.
 fn absolute_header_line(p: &PhotometryReport) -> String {
+    let source = match p.from {
+        crate::photometry::FROM_PROFILE => {
+            "the camera profile's constant and EXIF time, ISO and f-number".to_string()
+        }
+        crate::photometry::FROM_METER_EQUATION => format!(
+            "EXIF time, ISO and f-number by the reflected-light meter equation (K = {}), an estimate",
+            crate::camera::METER_CONSTANT_K
+        ),
+        reading => format!("the {reading} reading"),
+    };
     let mut s = format!(
-        "{}: Radiance W/sr/m2, luminance = 179*(0.265 R + 0.670 G + 0.065 B) cd/m2; scaled by {} from the {} reading",
+        "{}: Radiance W/sr/m2, luminance = 179*(0.265 R + 0.670 G + 0.065 B) cd/m2; scaled by {} from {source}",
         ABSOLUTE_UNITS_LINE,
         fmt_num(format!("{:.8e}", p.scale).parse().unwrap_or(p.scale)),
-        p.from
     );
+    if let Some(u) = p.uncertainty_percent {
+        s += &format!(" (+/-{} %)", fmt_num(u));
+    }
     if let Some(d) = p.disagreement_percent {
         s += &format!(" (illuminance reading disagrees by {d:+.1} %)");
     }

@@ -244,4 +244,28 @@ pub struct Options {
     pub products: Products,
     /// Measurements that make the radiance absolute (see [`crate::photometry`]).
     pub reference: Reference,
+    /// Where an absolute scale comes from when no measurement is given (a measurement in
+    /// [`Options::reference`] always wins).
+    pub absolute: AbsoluteMode,
 }
+
+/// Where the absolute scale comes from without a meter reading.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AbsoluteMode {
+    /// The camera profile's absolute constant ([`crate::camera::AbsoluteConstant`]) with the
+    /// frames' EXIF time, ISO and f-number, when the profile has one; else relative.
+    #[default]
+    Profile,
+    /// The reflected-light meter equation (`K` = 12.5) with the frames' EXIF time, ISO and
+    /// f-number: an estimate within ±30 %, labelled so in the header and the report.
+    Exif,
+    /// Relative radiance, even with a profile's constant.
+    None,
+}
+
+crate::named_enum!(AbsoluteMode, "absolute mode", [
+    Profile => "profile",
+    Exif => "exif",
+    None => "none"
+]);

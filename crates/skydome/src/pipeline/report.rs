@@ -103,6 +103,10 @@ pub struct Dome {
     /// The camera profile made by calibrating on this bracket (with the camera's EXIF make,
     /// model, ISO and date), when it calibrated.
     pub camera_profile: Option<CameraProfile>,
+    /// Why [`Dome::camera_profile`] got no absolute constant although a meter reading made
+    /// this dome absolute (frames without EXIF ISO or f-number, a RAW bracket); `None` when it
+    /// got one or when there was nothing to store.
+    pub absolute_constant_refused: Option<String>,
     /// The lens profile used, when there was a lens.
     pub lens_profile: Option<LensProfile>,
     /// The report.

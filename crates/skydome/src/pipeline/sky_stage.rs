@@ -7,6 +7,7 @@ use std::borrow::Cow;
 
 use serde::Serialize;
 
+use super::absolute::ConstantScale;
 use super::progress::{Reporter, Stage};
 use super::{default_equirect_width, EquirectOptions, Options, PipelineError, SunDisc, SunMode};
 use crate::bracket::Bracket;
@@ -216,6 +217,7 @@ pub(super) fn run(
     lens: Option<(LensProfile, Option<CircleFit>)>,
     mut radiance: HdrImage,
     clipped: Option<&[u8]>,
+    constant: Option<&ConstantScale>,
     progress: &mut Reporter<'_>,
 ) -> Result<SkyOutcome, PipelineError> {
     if let Some((l, _)) = &lens {
@@ -223,7 +225,8 @@ pub(super) fn run(
             fisheye::devignette(&mut radiance, l, v);
         }
     }
-    let photometry = calibrate_absolute(o, br, lens.as_ref().map(|l| &l.0), &mut radiance)?;
+    let photometry =
+        calibrate_absolute(o, br, lens.as_ref().map(|l| &l.0), constant, &mut radiance)?;
     let Some(lens) = lens else {
         return Ok(SkyOutcome {
             image: radiance,
@@ -237,16 +240,39 @@ pub(super) fn run(
     Ok(out)
 }
 
-/// Scales `radiance` to Radiance's absolute units when a measurement is given.
+/// Scales `radiance` to Radiance's absolute units when a measurement is given, else by the
+/// `constant` (the camera profile's, or the meter equation's) when there is one.
 fn calibrate_absolute(
     o: &Options,
     br: &Bracket,
     lens: Option<&LensProfile>,
+    constant: Option<&ConstantScale>,
     radiance: &mut HdrImage,
 ) -> Result<Option<PhotometryReport>, PipelineError> {
     let r = &o.reference;
     if r.is_empty() {
-        return Ok(None);
+        let Some(c) = constant else {
+            return Ok(None);
+        };
+        let k = c.scale as f32;
+        radiance.data.iter_mut().for_each(|v| *v *= k);
+        let illuminance = match lens {
+            Some(lens) => {
+                let g = full_geometry(o, br, lens)?;
+                Some(radiance_luminance(
+                    reproject::horizontal_irradiance_fisheye(radiance, &g),
+                ))
+            }
+            None => None,
+        };
+        return Ok(Some(PhotometryReport {
+            scale: c.scale,
+            from: c.from,
+            patch_luminance_cd_m2: None,
+            horizontal_illuminance_lux: illuminance,
+            disagreement_percent: None,
+            uncertainty_percent: c.uncertainty_percent,
+        }));
     }
     let patch = match &r.luminance {
         Some(s) => Some(photometry::patch_luminance(radiance, s)?),
@@ -580,7 +606,9 @@ fn reconstruct_sun(
     let (direct, from, rescale) = match (photometry.map(|p| p.from), reading) {
         // Absolute from a luminance reading, and the illuminance measured: the difference.
         (Some("luminance"), Some(e)) => (e - diffuse, DirectSource::MeasuredIlluminance, 1.0),
-        (Some("luminance"), None) => (model_direct, DirectSource::ModelDirectNormal, 1.0),
+        // Absolute without an illuminance reading (a luminance reading, the camera profile's
+        // constant, the meter equation): the model's absolute direct part.
+        (Some(_), None) => (model_direct, DirectSource::ModelDirectNormal, 1.0),
         // The illuminance reading alone set the scale, sun clipped: it is the total, split into
         // diffuse and direct by the model.
         (Some(_), Some(e)) => {

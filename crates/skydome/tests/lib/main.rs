@@ -13,6 +13,7 @@ mod fisheye_support;
 #[path = "../../../../fuzz/src/lib.rs"]
 mod fuzz_targets;
 
+mod absolute;
 mod align;
 mod bracket_real;
 mod bracket_zoo;
