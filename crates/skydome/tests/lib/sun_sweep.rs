@@ -232,6 +232,29 @@ fn clipped_in_middle(frames: &[DecodedFrame]) -> usize {
     v.chunks_exact(3).filter(|p| p.contains(&255)).count()
 }
 
+/// The largest code (any channel) within 2 pixels of `sun` in each frame.
+fn codes_near(frames: &[DecodedFrame], g: &SkyGeometry, sun: &Direction) -> Vec<u8> {
+    let Some(p) = g.direction_to_pixel(sun) else {
+        return Vec::new();
+    };
+    frames
+        .iter()
+        .map(|f| {
+            let skydome::bracket::Pixels::U8(v) = &f.pixels else {
+                panic!("8-bit")
+            };
+            let mut m = 0u8;
+            for y in (p.y as i64 - 2).max(0)..=(p.y as i64 + 2).min(f.height as i64 - 1) {
+                for x in (p.x as i64 - 2).max(0)..=(p.x as i64 + 2).min(f.width as i64 - 1) {
+                    let i = 3 * (y as usize * f.width + x as usize);
+                    m = m.max(v[i]).max(v[i + 1]).max(v[i + 2]);
+                }
+            }
+            m
+        })
+        .collect()
+}
+
 /// Horizontal illuminance of the render (lux): what a meter beside the camera reads.
 fn truth_illuminance(s: &Scene) -> f64 {
     radiance_luminance(skydome::reproject::horizontal_irradiance_fisheye(
@@ -258,6 +281,11 @@ struct Score {
     /// Reconstructed diffuse horizontal / the render's diffuse − 1.
     diffuse_error: Option<f64>,
     clipped_mid: usize,
+    /// The dome's horizontal illuminance (absolute, from the spot reading) / the render's − 1.
+    dome_error: f64,
+    /// The largest code (any channel) within 2 pixels of the true sun in each frame, shortest
+    /// first, and whether the merge flagged the sun's pixel clipped in every frame.
+    sun_codes: Vec<u8>,
     warnings: Vec<String>,
 }
 
@@ -295,6 +323,7 @@ fn score(s: &Scene) -> Score {
     let truth_sun = Direction::new(t.sun_azimuth_deg, t.sun_elevation_deg);
     let mut frames = photograph(s);
     let clipped_mid = clipped_in_middle(&frames);
+    let sun_codes = codes_near(&frames, &geometry(t, false), &truth_sun);
     let info = exif_info(t);
     for f in &mut frames {
         f.info = info.clone();
@@ -356,6 +385,8 @@ fn score(s: &Scene) -> Score {
         direct_error,
         diffuse_error,
         clipped_mid,
+        dome_error: geo.horizontal_illuminance / reading - 1.0,
+        sun_codes,
         warnings: dome.report.warnings.clone(),
     }
 }
@@ -414,7 +445,7 @@ fn table(label: &str, scores: &[Score]) {
 
 fn print_scene(s: &Score, t: &Truth) {
     eprintln!(
-        "{} [{}] {} (dn {:.0} lx, dh {:.0} lx) {} el {:.1} visible {} partial {} ({:?}) clouds {} obstacles {} frames {} ev {:+}: found {:?} error {:?} dn {:?} dh {:?}; clipped in the middle frame {}; warnings {:?}",
+        "{} [{}] {} (dn {:.0} lx, dh {:.0} lx) {} el {:.1} visible {} partial {} ({:?}) clouds {} obstacles {} frames {} ev {:+}: found {:?} error {:?} dn {:?} dh {:?} dome {:+.1} %; sun codes {:?}; clipped in the middle frame {}; warnings {:?}",
         s.name,
         s.split,
         t.sky,
@@ -433,6 +464,8 @@ fn print_scene(s: &Score, t: &Truth) {
         s.error_deg,
         s.direct_error,
         s.diffuse_error,
+        100.0 * s.dome_error,
+        s.sun_codes,
         s.clipped_mid,
         s.warnings
     );
