@@ -377,7 +377,7 @@ def write_json(path, value):
 # ---------------------------------------------------------------------------------------------
 # The sets.
 
-FRAME_SETS = {2: [-1.5, 1.5], 3: [-2.0, 0.0, 2.0], 5: [-6.0, -4.0, -2.0, 0.0, 2.0]}
+FRAME_SETS = {2: [-1.5, 1.5], 3: [-2.0, 0.0, 2.0], 4: [-4.0, -2.0, 0.0, 2.0], 5: [-6.0, -4.0, -2.0, 0.0, 2.0]}
 
 
 def sweep_scenes():
@@ -456,13 +456,24 @@ FRESH_SEED = 2211
 FRESH_BANDS = [(3.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, 45.0), (45.0, 90.0)]
 
 
-def fresh_scenes():
+HOLDOUT_SEED = 2212
+
+
+def holdout_scenes():
+    """The second held-out set (seed 2212, never used before), rendered after the finder was
+    frozen again on 2026-11-25 (the shortest frame's ceiling codes taken as clipped): drawn as
+    ``fresh`` is, with 2, 3, 4 or 5 frames."""
+    return fresh_scenes(HOLDOUT_SEED, "holdout", [2, 3, 4, 5])
+
+
+def fresh_scenes(seed=None, prefix="fresh", frame_counts=(2, 3, 3, 5)):
     """A held-out set rendered after the detector was frozen (seed 2211, never used before):
     6 scenes per elevation band (3–5, 5–10, 10–20, 20–45, 45–90°), azimuth, sky (clear, hazy,
     intermediate, overcast), a cloud over the sun, clouds elsewhere, trees or buildings, lens
     180°/190°, size, 2/3/5 frames and exposure all drawn from the seed. Every field is drawn in
     the same order for every scene, so adding scenes never changes the earlier ones."""
-    rng = random.Random(FRESH_SEED)
+    seed = FRESH_SEED if seed is None else seed
+    rng = random.Random(seed)
     scenes = []
     per_band = 6
     for b, (lo, hi) in enumerate(FRESH_BANDS):
@@ -502,18 +513,18 @@ def fresh_scenes():
             if obstacle:
                 centre = az + centre_off
                 obstacles.append(
-                    dict(kind=okind, seed=FRESH_SEED + i, height=height,
+                    dict(kind=okind, seed=seed + i, height=height,
                          **{"from": centre - width / 2, "to": centre + width / 2})
                 )
             fov = rng.choice([180.0, 190.0])
             size = rng.choice([256, 320, 384])
-            frames = rng.choice([2, 3, 3, 5])
+            frames = rng.choice(list(frame_counts))
             ev = round(rng.uniform(-1.0, 1.5), 2)
             dn, dh = illuminance(kind, el)
             scenes.append(
                 dict(
-                    name=f"fresh{i:02d}",
-                    set="fresh",
+                    name=f"{prefix}{i:02d}",
+                    set=prefix,
                     split="held-out",
                     sun_request=[az, el],
                     sky=kind,
@@ -523,7 +534,7 @@ def fresh_scenes():
                     obstacles=obstacles,
                     fov_deg=fov,
                     size=size,
-                    camera=dict(ev_offset=ev, evs=FRAME_SETS[frames], seed=FRESH_SEED * 10 + i),
+                    camera=dict(ev_offset=ev, evs=FRAME_SETS[frames], seed=seed * 10 + i),
                     time=None,
                     latitude_deg=None,
                     longitude_deg=None,
@@ -608,7 +619,7 @@ def key_of(scene):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", required=True)
-    ap.add_argument("--set", choices=["sweep", "fresh", "ci", "day", "issue", "all"], default="all")
+    ap.add_argument("--set", choices=["sweep", "fresh", "holdout", "ci", "day", "issue", "all"], default="all")
     ap.add_argument("--split", choices=["tune", "held-out", "both"], default="both")
     ap.add_argument("--only", help="render only scenes whose name starts with this")
     ap.add_argument("--describe", action="store_true", help="print the scenes, render nothing")
@@ -618,6 +629,8 @@ def main():
         scenes += sweep_scenes()
     if args.set in ("fresh", "all"):
         scenes += fresh_scenes()
+    if args.set in ("holdout", "all"):
+        scenes += holdout_scenes()
     if args.set == "ci":
         scenes += [s for s in fresh_scenes() if s["name"] in CI_SCENES]
     if args.set in ("day", "all"):

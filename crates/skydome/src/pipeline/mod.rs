@@ -154,6 +154,7 @@ pub fn run(
         warnings: merge_warnings,
         sigma,
         raw: raw_report,
+        at_ceiling,
     } = match &raw {
         Some(colour) => raw_merge_stage(options, &mut br, colour, lens_circle, &mut progress)?,
         None => merge_stage(
@@ -168,7 +169,8 @@ pub fn run(
         .as_ref()
         .map(|s| ErrorSummary::of(s, lens_circle.as_ref()));
     let merged_radiance = std::mem::replace(&mut merged.radiance, HdrImage::new(0, 0));
-    let clipped = merged.clipped.as_deref();
+    let sun_mask = sun_clip_mask(merged.clipped.as_deref(), &at_ceiling);
+    let clipped = sun_mask.as_deref();
     let SkyOutcome {
         image: radiance,
         photometry,
@@ -361,6 +363,49 @@ struct MergeOutcome {
     sigma: Option<HdrImage>,
     /// What the RAW path read and estimated, for a RAW bracket.
     raw: Option<RawReport>,
+    /// The pixels (row-major indices) the shortest 8-bit frame reads at its ceiling
+    /// ([`CEILING_CODE`]) in some channel, when a lens is known ([`shortest_at_ceiling`]).
+    at_ceiling: Vec<u32>,
+}
+
+/// From this code up, a pixel of the shortest 8-bit frame is taken as clipped when the sky stage
+/// looks for the sun and decides whether to rebuild its disc: a JPEG's ringing pulls a clipped
+/// 255 down by a few codes (the merge's consistency test treats the same codes as lower bounds),
+/// and a sun read at 251–254 in the shortest frame was otherwise merged as measured, its disc
+/// never rebuilt, and the dome's illuminance 40–87 % short.
+pub const CEILING_CODE: u8 = 250;
+
+/// The pixels of the shortest frame of `frames` (shortest first) that read at least
+/// [`CEILING_CODE`] in some channel; empty for 16-bit frames, which have no JPEG ringing.
+fn shortest_at_ceiling(frames: &[bracket::Frame]) -> Vec<u32> {
+    match frames.first().map(|f| &f.pixels) {
+        Some(bracket::Pixels::U8(v)) => v
+            .chunks_exact(3)
+            .enumerate()
+            .filter(|(_, p)| p.iter().any(|&c| c >= CEILING_CODE))
+            .map(|(i, _)| i as u32)
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// The clip mask the sky stage judges the sun by: the merge's flags, with the pixels at the
+/// shortest frame's ceiling flagged [`merge::CLIPPED_HIGH`] too.
+fn sun_clip_mask<'a>(
+    clipped: Option<&'a [u8]>,
+    at_ceiling: &[u32],
+) -> Option<std::borrow::Cow<'a, [u8]>> {
+    let mask = clipped?;
+    if at_ceiling.is_empty() {
+        return Some(std::borrow::Cow::Borrowed(mask));
+    }
+    let mut m = mask.to_vec();
+    for &i in at_ceiling {
+        if let Some(f) = m.get_mut(i as usize) {
+            *f |= merge::CLIPPED_HIGH;
+        }
+    }
+    Some(std::borrow::Cow::Owned(m))
 }
 
 /// The merge stage of a RAW bracket: linear frames merged per camera channel with their
@@ -408,6 +453,7 @@ fn raw_merge_stage(
         inconsistent_fraction: None,
         warnings,
         sigma: options.products.confidence.then_some(lin.sigma_stops),
+        at_ceiling: Vec::new(),
         raw: Some(RawReport {
             colour: colour.clone(),
             noise: lin.noise,
@@ -442,6 +488,10 @@ fn merge_stage(
         .iter()
         .map(|f| f.exposure.relative().ln())
         .collect();
+    let at_ceiling = match lens_circle {
+        Some(_) => shortest_at_ceiling(&br.frames),
+        None => Vec::new(),
+    };
     let merged = merge::merge_releasing(
         &mut br.frames,
         response,
@@ -486,6 +536,7 @@ fn merge_stage(
         warnings,
         sigma,
         raw: None,
+        at_ceiling,
     })
 }
 

@@ -13,6 +13,10 @@
 //!   gives and [`held_out_suns_are_found_and_no_false_one`] holds; CI scores its six-scene `ci`
 //!   part (chosen by what the scenes show, before any was scored), `SKYDOME_SUN_SWEEP=fresh`
 //!   all 30;
+//! - `holdout`: 30 scenes from seed 2212 (2–5 frames), rendered after the finder was frozen
+//!   again (the shortest frame's ceiling codes counted as clipped, a change made looking at
+//!   `fresh`, which is therefore spent) and scored once — the **held-out** set of
+//!   `docs/station.md` now; `SKYDOME_SUN_SWEEP=holdout` or `all`;
 //! - `day`: one station's day (one capture an hour, some suns behind clouds, time and site as
 //!   EXIF gives them), `SKYDOME_SUN_SWEEP=day` or `all`;
 //! - `issue`: the issue's own case, always.
@@ -54,14 +58,22 @@ const FRESH_FOUND_MIN: f64 = 0.95;
 const FRESH_ERROR_MAX_DEG: f64 = 0.5;
 
 /// The largest |direct normal error| of a rebuilt (clipped) sun on the fresh held-out set:
-/// measured 30.8 % (a hazy sun 3.7° up), held at 35 %.
+/// measured 32.1 % (a hazy sun 4.3° up; 30.8 % before the ceiling codes counted as clipped),
+/// held at 35 %.
 const FRESH_DIRECT_MAX: f64 = 0.35;
 
-/// The false sun measured on the fresh held-out set, an open failure of the detector (not
-/// tuned away, so the set stays held out): `fresh23`, a clear sky whose sun hides behind a
-/// bright cloud (10× the diffuse sky's luminance, 2 frames), where one pixel of the cloud clips
-/// even in the shorter frame and passes for a clipped core. Any other false sun fails.
-const FRESH_KNOWN_FALSE_SUNS: &[&str] = &["fresh23"];
+/// False suns allowed on the fresh set: none. Its one false sun (`fresh23`: a sun behind a
+/// cloud 10× the diffuse sky, 2 frames, one cloud pixel at 255 in the shorter frame) went when
+/// the shortest frame's ceiling codes counted as clipped: the cloud's clipped region is seen
+/// whole, too large and ragged for a sun. The fresh set was looked at for that change, so it is
+/// no longer held out; the `holdout` set is.
+const FRESH_KNOWN_FALSE_SUNS: &[&str] = &[];
+
+/// The largest |dome horizontal illuminance error| on the fresh set, against the meter reading
+/// (which also sets a rebuilt disc's direct part): measured 4.3 % (`fresh23`, the sun behind a
+/// cloud: nothing to rebuild); before the ceiling codes counted as clipped 40–87 % in four
+/// scenes whose visible sun read 251–254 in the shortest frame. Held at 8 %.
+const FRESH_DOME_MAX: f64 = 0.08;
 
 /// A rendered scene and what it was made of (`truth.json`).
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -236,6 +248,29 @@ fn clipped_in_middle(frames: &[DecodedFrame]) -> usize {
     v.chunks_exact(3).filter(|p| p.contains(&255)).count()
 }
 
+/// The largest code (any channel) within 2 pixels of `sun` in each frame.
+fn codes_near(frames: &[DecodedFrame], g: &SkyGeometry, sun: &Direction) -> Vec<u8> {
+    let Some(p) = g.direction_to_pixel(sun) else {
+        return Vec::new();
+    };
+    frames
+        .iter()
+        .map(|f| {
+            let skydome::bracket::Pixels::U8(v) = &f.pixels else {
+                panic!("8-bit")
+            };
+            let mut m = 0u8;
+            for y in (p.y as i64 - 2).max(0)..=(p.y as i64 + 2).min(f.height as i64 - 1) {
+                for x in (p.x as i64 - 2).max(0)..=(p.x as i64 + 2).min(f.width as i64 - 1) {
+                    let i = 3 * (y as usize * f.width + x as usize);
+                    m = m.max(v[i]).max(v[i + 1]).max(v[i + 2]);
+                }
+            }
+            m
+        })
+        .collect()
+}
+
 /// Horizontal illuminance of the render (lux): what a meter beside the camera reads.
 fn truth_illuminance(s: &Scene) -> f64 {
     radiance_luminance(skydome::reproject::horizontal_irradiance_fisheye(
@@ -262,6 +297,11 @@ struct Score {
     /// Reconstructed diffuse horizontal / the render's diffuse − 1.
     diffuse_error: Option<f64>,
     clipped_mid: usize,
+    /// The dome's horizontal illuminance (absolute, from the spot reading) / the render's − 1.
+    dome_error: f64,
+    /// The largest code (any channel) within 2 pixels of the true sun in each frame, shortest
+    /// first, and whether the merge flagged the sun's pixel clipped in every frame.
+    sun_codes: Vec<u8>,
     warnings: Vec<String>,
 }
 
@@ -299,6 +339,7 @@ fn score(s: &Scene) -> Score {
     let truth_sun = Direction::new(t.sun_azimuth_deg, t.sun_elevation_deg);
     let mut frames = photograph(s);
     let clipped_mid = clipped_in_middle(&frames);
+    let sun_codes = codes_near(&frames, &geometry(t, false), &truth_sun);
     let info = exif_info(t);
     for f in &mut frames {
         f.info = info.clone();
@@ -360,6 +401,8 @@ fn score(s: &Scene) -> Score {
         direct_error,
         diffuse_error,
         clipped_mid,
+        dome_error: geo.horizontal_illuminance / reading - 1.0,
+        sun_codes,
         warnings: dome.report.warnings.clone(),
     }
 }
@@ -376,7 +419,7 @@ const BANDS: [(f64, f64); 5] = [
 /// angular error, false suns, and the direct and diffuse errors.
 fn table(label: &str, scores: &[Score]) {
     eprintln!(
-        "{label}: band | visible found/all | error median / max (°) | false suns / scenes | direct normal |err| median / max | diffuse |err| median"
+        "{label}: band | visible found/all | error median / max (°) | false suns / scenes | direct normal |err| median / max | diffuse |err| median | dome illuminance |err| max"
     );
     for (lo, hi) in BANDS {
         let band: Vec<&Score> = scores
@@ -400,10 +443,14 @@ fn table(label: &str, scores: &[Score]) {
             .filter_map(|s| s.diffuse_error.map(f64::abs))
             .collect();
         dh.sort_by(f64::total_cmp);
+        let dome = band
+            .iter()
+            .map(|s| s.dome_error.abs())
+            .fold(0.0f64, f64::max);
         let med = |v: &[f64]| v.get(v.len() / 2).copied().unwrap_or(f64::NAN);
         let max = |v: &[f64]| v.last().copied().unwrap_or(f64::NAN);
         eprintln!(
-            "{label}: {lo:>2}–{hi:<2}° | {found}/{} | {:.2} / {:.2} | {} / {} | {:.1} % / {:.1} % | {:.1} %",
+            "{label}: {lo:>2}–{hi:<2}° | {found}/{} | {:.2} / {:.2} | {} / {} | {:.1} % / {:.1} % | {:.1} % | {:.1} %",
             vis.len(),
             med(&errs),
             max(&errs),
@@ -412,13 +459,14 @@ fn table(label: &str, scores: &[Score]) {
             100.0 * med(&dn),
             100.0 * max(&dn),
             100.0 * med(&dh),
+            100.0 * dome,
         );
     }
 }
 
 fn print_scene(s: &Score, t: &Truth) {
     eprintln!(
-        "{} [{}] {} (dn {:.0} lx, dh {:.0} lx) {} el {:.1} visible {} partial {} ({:?}) clouds {} obstacles {} frames {} ev {:+}: found {:?} error {:?} dn {:?} dh {:?}; clipped in the middle frame {}; warnings {:?}",
+        "{} [{}] {} (dn {:.0} lx, dh {:.0} lx) {} el {:.1} visible {} partial {} ({:?}) clouds {} obstacles {} frames {} ev {:+}: found {:?} error {:?} dn {:?} dh {:?} dome {:+.1} %; sun codes {:?}; clipped in the middle frame {}; warnings {:?}",
         s.name,
         s.split,
         t.sky,
@@ -437,6 +485,8 @@ fn print_scene(s: &Score, t: &Truth) {
         s.error_deg,
         s.direct_error,
         s.diffuse_error,
+        100.0 * s.dome_error,
+        s.sun_codes,
         s.clipped_mid,
         s.warnings
     );
@@ -538,6 +588,65 @@ fn held_out_suns_are_found_and_no_false_one() {
         100.0 * worst.0,
         worst.1
     );
+    hold_dome(&label, &scores, FRESH_DOME_MAX);
+}
+
+/// Every scene's dome horizontal illuminance within `max` of the meter's.
+fn hold_dome(label: &str, scores: &[Score], max: f64) {
+    let worst = scores
+        .iter()
+        .map(|s| (s.dome_error.abs(), s.name.as_str()))
+        .fold((0.0, ""), |a, b| if b.0 > a.0 { b } else { a });
+    assert!(
+        worst.0 <= max,
+        "{label}: dome illuminance off by {:.1} % in {}",
+        100.0 * worst.0,
+        worst.1
+    );
+}
+
+/// The share of visible suns of the `holdout` set (seed 2212) the finder must find: measured
+/// 22 of 22, held with a margin of one sun in 20.
+const HOLDOUT_FOUND_MIN: f64 = 0.95;
+
+/// The largest |direct normal error| of a rebuilt sun on the `holdout` set: measured 24.0 % (a
+/// sun 3–5° up), held at 35 %.
+const HOLDOUT_DIRECT_MAX: f64 = 0.35;
+
+/// The largest |dome horizontal illuminance error| on the `holdout` set, against the meter:
+/// measured 4.4 %, held at 8 %.
+const HOLDOUT_DOME_MAX: f64 = 0.08;
+
+/// The second held-out set (seed 2212, 30 scenes, 2–5 frames; rendered after the finder was
+/// frozen again and scored once, untouched; `docs/station.md` has the table): no false sun,
+/// every visible sun within 0.5°, the direct part and the dome's illuminance within the
+/// measured worst plus a margin. `SKYDOME_SUN_SWEEP=holdout` or `all` (30 renders, too slow
+/// for CI).
+#[test]
+fn second_held_out_set_finds_every_sun_and_no_false_one() {
+    if !matches!(sweep_env().as_str(), "holdout" | "all") {
+        eprintln!(
+            "skipping second_held_out_set_finds_every_sun_and_no_false_one: set SKYDOME_SUN_SWEEP=holdout or all (30 renders, too slow for CI)"
+        );
+        return;
+    }
+    let Some(scenes) = scenes("holdout", "both") else {
+        return;
+    };
+    let scores = score_all(&scenes);
+    table("holdout", &scores);
+    hold_to_targets("holdout", &scores, HOLDOUT_FOUND_MIN, FRESH_ERROR_MAX_DEG);
+    let worst = scores
+        .iter()
+        .filter_map(|s| s.direct_error.map(|e| (e.abs(), s.name.as_str())))
+        .fold((0.0, ""), |a, b| if b.0 > a.0 { b } else { a });
+    assert!(
+        worst.0 <= HOLDOUT_DIRECT_MAX,
+        "holdout: direct normal off by {:.1} % in {}",
+        100.0 * worst.0,
+        worst.1
+    );
+    hold_dome("holdout", &scores, HOLDOUT_DOME_MAX);
 }
 
 /// No false sun, every found sun within `max_error_deg`, and at least `min_found` of the
