@@ -6,18 +6,20 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 use skydome::camera::CameraProfile;
 use skydome::image::Circle;
-use skydome::response::{self, CalibrateOptions, Solver};
-use skydome::sampling::SampleOptions;
+use skydome::response::{self, CalibrateOptions, Fit, Solver};
+use skydome::sampling::{SampleOptions, GRID_METHOD_SAMPLES};
 
 use crate::io::{self, BracketArgs, Outputs};
 
 /// How calibration samples and the solve are chosen (shared by `calibrate` and `merge`).
 #[derive(Debug, Clone, clap::Args)]
 pub struct CalibArgs {
-    /// Number of sample pixels N (raised automatically so that N·(frames−1) ≥ 255 unless --method seed).
-    #[arg(long, default_value_t = 100)]
-    pub samples: usize,
-    /// Grid size G: samples are drawn in G×G cells over the usable area.
+    /// Number of sample pixels N (default 100; 2000 with --method noise; raised automatically so
+    /// that N·(frames−1) ≥ 255 unless --method seed).
+    #[arg(long)]
+    pub samples: Option<usize>,
+    /// Grid size G: with --method seed or --stratify 0, samples are drawn in G×G cells over the
+    /// usable area.
     #[arg(long, default_value_t = 10)]
     pub grid: usize,
     /// Seed of the sample selection (same seed, same samples).
@@ -27,11 +29,21 @@ pub struct CalibArgs {
     /// too few observations, so both ends of the curve rest on data (0 = off).
     #[arg(long, default_value_t = 16, value_name = "N")]
     pub code_bands: usize,
-    /// Smoothness weight λ of the second-derivative term.
-    #[arg(long, default_value_t = CalibrateOptions::default().lambda)]
-    pub lambda: f64,
-    /// `robust` rejects clipped, edge and non-monotonic samples and raises N; `seed` is the
-    /// original method exactly (random pixels per cell, no rejection).
+    /// Stratified draw: candidates in N bands of the middle frame's code, taken from every band
+    /// in turn (default 0 = the grid draw; 32 with --method noise).
+    #[arg(long, value_name = "N")]
+    pub stratify: Option<usize>,
+    /// How the curve is fitted: `hat` is Debevec & Malik's hat weight (default); `noise`
+    /// reweights every observation by the noise its code shows and drops outliers (moved
+    /// pixels; the default of --method noise).
+    #[arg(long, value_parser = parse_fit)]
+    pub fit: Option<Fit>,
+    /// Smoothness weight λ of the second-derivative term (default 30; 100 with --method noise).
+    #[arg(long)]
+    pub lambda: Option<f64>,
+    /// `robust` rejects clipped, edge and non-monotonic samples and raises N; `noise` is robust
+    /// with 2000 samples stratified over the middle frame's codes and the noise-weighted fit
+    /// (λ 100); `seed` is the original method exactly (random pixels per cell, no rejection).
     #[arg(long, value_enum, default_value_t = Method::Robust)]
     pub method: Method,
     /// Least-squares solver: `schur` (fast, default) or `svd` (the seed's dense SVD, slow).
@@ -47,8 +59,14 @@ pub struct CalibArgs {
 pub enum Method {
     /// Rejection of useless samples and automatic N.
     Robust,
+    /// Robust, stratified, 2000 samples, the noise-weighted fit.
+    Noise,
     /// The seed's method exactly.
     Seed,
+}
+
+fn parse_fit(s: &str) -> Result<Fit, String> {
+    s.parse().map_err(|e: skydome::UnknownName| e.to_string())
 }
 
 fn parse_solver(s: &str) -> Result<Solver, String> {
@@ -71,20 +89,29 @@ pub fn parse_circle(s: &str) -> Result<Circle, String> {
 impl CalibArgs {
     /// Library options for these arguments.
     pub fn options(&self) -> CalibrateOptions {
-        let sampling = match self.method {
-            Method::Robust => SampleOptions {
-                samples: self.samples,
+        let robust = |base: CalibrateOptions| CalibrateOptions {
+            sampling: SampleOptions {
+                samples: self.samples.unwrap_or(base.sampling.samples),
                 grid: self.grid,
                 seed: self.seed,
                 code_bands: self.code_bands,
-                ..SampleOptions::default()
+                stratify: self.stratify.unwrap_or(base.sampling.stratify),
+                ..base.sampling.clone()
             },
-            Method::Seed => SampleOptions::seed_method(self.samples, self.grid, self.seed),
-        };
-        CalibrateOptions {
-            sampling,
-            lambda: self.lambda,
+            lambda: self.lambda.unwrap_or(base.lambda),
             solver: self.solver,
+            fit: self.fit.unwrap_or(base.fit),
+        };
+        match self.method {
+            Method::Robust => robust(CalibrateOptions::default()),
+            Method::Noise => robust(CalibrateOptions::noise_fit()),
+            Method::Seed => CalibrateOptions::seed_method(
+                self.samples.unwrap_or(GRID_METHOD_SAMPLES),
+                self.grid,
+                self.seed,
+                self.lambda.unwrap_or(response::SEED_LAMBDA),
+                self.solver,
+            ),
         }
     }
 }

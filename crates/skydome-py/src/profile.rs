@@ -6,7 +6,7 @@ use numpy::PyArray2;
 use pyo3::prelude::*;
 use skydome::image::Circle;
 use skydome::pipeline;
-use skydome::response::{self, CalibrateOptions};
+use skydome::response::{self, CalibrateOptions, Fit};
 use skydome::sampling::SampleOptions;
 
 use crate::errors::{error, pipeline_error, value_error};
@@ -200,33 +200,43 @@ pub fn json_dumps(obj: &Bound<'_, PyAny>) -> PyResult<String> {
 ///
 /// Returns a :class:`CameraProfile` carrying the camera's EXIF make, model, ISO and date.
 #[pyfunction]
-#[pyo3(signature = (frames, times=None, *, samples=100, grid=10, seed=0, code_bands=16,
-    lambda_=30.0, method="robust", solver="schur", circle=None, linear=false, progress=None))]
+#[pyo3(signature = (frames, times=None, *, samples=None, grid=10, seed=0, code_bands=16,
+    lambda_=None, method="robust", solver="schur", circle=None, linear=false, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate(
     py: Python<'_>,
     frames: &Bound<'_, PyAny>,
     times: Option<&Bound<'_, PyAny>>,
-    samples: usize,
+    samples: Option<usize>,
     grid: usize,
     seed: u64,
     code_bands: usize,
-    lambda_: f64,
+    lambda_: Option<f64>,
     method: &str,
     solver: &str,
     circle: Option<(f64, f64, f64)>,
     linear: bool,
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<CameraProfile> {
-    let sampling = match method.trim().to_ascii_lowercase().as_str() {
-        "robust" => SampleOptions {
-            samples,
-            grid,
-            seed,
-            code_bands,
-            ..SampleOptions::default()
-        },
-        "seed" => SampleOptions::seed_method(samples, grid, seed),
+    let (sampling, fit) = match method.trim().to_ascii_lowercase().as_str() {
+        "robust" => (
+            SampleOptions {
+                samples: samples.unwrap_or(skydome::sampling::GRID_METHOD_SAMPLES),
+                grid,
+                seed,
+                code_bands,
+                ..SampleOptions::default()
+            },
+            Fit::Hat,
+        ),
+        "seed" => (
+            SampleOptions::seed_method(
+                samples.unwrap_or(skydome::sampling::GRID_METHOD_SAMPLES),
+                grid,
+                seed,
+            ),
+            Fit::Hat,
+        ),
         _ => {
             return Err(value_error(
                 "method",
@@ -236,10 +246,11 @@ pub fn calibrate(
     };
     let opts = CalibrateOptions {
         sampling,
-        lambda: lambda_,
+        lambda: lambda_.unwrap_or(response::SEED_LAMBDA),
         solver: solver
             .parse()
             .map_err(|e: skydome::UnknownName| value_error("solver", e))?,
+        fit,
     };
     let circle = match circle {
         Some((cx, cy, r)) if cx.is_finite() && cy.is_finite() && r.is_finite() && r > 0.0 => {

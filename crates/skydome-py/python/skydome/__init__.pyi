@@ -128,11 +128,11 @@ def calibrate(
     frames: Frames,
     times: Optional[Sequence[float]] = None,
     *,
-    samples: int = 100,
+    samples: Optional[int] = None,  # 100
     grid: int = 10,
     seed: int = 0,
     code_bands: int = 16,
-    lambda_: float = 30.0,
+    lambda_: Optional[float] = None,  # 30
     method: Literal["robust", "seed"] = "robust",
     solver: Literal["schur", "svd"] = "schur",
     circle: Optional[Tuple[float, float, float]] = None,
