@@ -11,9 +11,10 @@
 //! noise at the code each frame is *expected* to read for the true radiance (shot and read
 //! noise in electrons, quantisation and the JPEG noise measured against the same frames before
 //! compression, carried through the true slope of `g`), no weight for a clipped or black code
-//! or an expected code above 250. **skydome** calibrates its curve from the frames
-//! (`response::calibrate`, [`CalibrateOptions::noise_fit`]: 2000 stratified samples, the
-//! noise-weighted fit) and merges with [`Weighting::Noise`] — nothing known.
+//! or an expected code above 250. **skydome** calibrates its curve from the frames — nothing
+//! known — with the default calibration (`response::calibrate`, 100 grid samples, hat fit) and,
+//! separately, with the opt-in [`CalibrateOptions::noise_fit`] (`--method noise`: 2000
+//! stratified samples, the noise-weighted fit), and merges with [`Weighting::Noise`] and the hat.
 //!
 //! Error: per channel, the log2 RMSE (stops) against the true radiance after one scale per
 //! channel (the gauge), over the *sky*: pixels some frame reads in 10..=245 in every channel,
@@ -218,10 +219,14 @@ pub fn oracle(case: &Case) -> HdrImage {
     out
 }
 
-/// skydome with nothing known: the curve calibrated from the frames, the default merge, or the
-/// given weighting.
-pub fn skydome_merge(case: &Case, weighting: Option<Weighting>) -> HdrImage {
-    let cal = calibrate(&case.frames, case.circle, &CalibrateOptions::noise_fit()).unwrap();
+/// skydome with nothing known: the curve calibrated from the frames with `calibration`, merged
+/// with the given weighting (the default merge's without one).
+pub fn skydome_merge(
+    case: &Case,
+    calibration: &CalibrateOptions,
+    weighting: Option<Weighting>,
+) -> HdrImage {
+    let cal = calibrate(&case.frames, case.circle, calibration).unwrap();
     let mut opts = MergeOptions::default();
     if let Some(w) = weighting {
         opts.weighting = w;
@@ -275,13 +280,15 @@ fn rms3(e: [(f64, f64); 3]) -> f64 {
 pub struct Measured {
     /// Frames.
     pub n: usize,
-    /// Sky log2 RMSE (RMS over channels): oracle, default, hat, noise.
+    /// Sky log2 RMSE (RMS over channels): the oracle; the noise merge and the hat on the default
+    /// calibration; the noise merge on the noise-weighted calibration (`--method noise`).
     pub sky: [f64; 4],
-    /// Dim-ground log2 RMSE after the sky's scale: default and hat.
-    pub ground: [f64; 2],
+    /// Dim-ground log2 RMSE after the sky's scale: noise merge and hat on the default
+    /// calibration, noise merge on the noise-weighted calibration.
+    pub ground: [f64; 3],
     /// Sun: median over the disc of log2(merged / truth) after the sky's scale (a lower bound,
-    /// negative; closer to zero is better): default and hat.
-    pub sun: [f64; 2],
+    /// negative; closer to zero is better), the same three merges.
+    pub sun: [f64; 3],
 }
 
 /// Dim-ground error about the sky's per-channel scale: the RMS over channels and pixels of
@@ -328,21 +335,24 @@ pub fn measure(seed: u64, n: usize) -> (Case, Measured) {
     let c = case(seed, n);
     let [sky, ground, sun] = regions(&c);
     let orc = oracle(&c);
-    let def = skydome_merge(&c, Some(Weighting::Noise));
-    let hat = skydome_merge(&c, Some(Weighting::Hat));
-    let noise = skydome_merge(&c, Some(Weighting::Noise));
+    let grid = CalibrateOptions::default();
+    let def = skydome_merge(&c, &grid, Some(Weighting::Noise));
+    let hat = skydome_merge(&c, &grid, Some(Weighting::Hat));
+    let noise = skydome_merge(&c, &CalibrateOptions::noise_fit(), Some(Weighting::Noise));
     let e = |img: &HdrImage| scale_and_rmse(img, &c.truth, &sky);
-    let (ed, eh) = (e(&def), e(&hat));
+    let (ed, eh, en) = (e(&def), e(&hat), e(&noise));
     let m = Measured {
         n,
-        sky: [rms3(e(&orc)), rms3(ed), rms3(eh), rms3(e(&noise))],
+        sky: [rms3(e(&orc)), rms3(ed), rms3(eh), rms3(en)],
         ground: [
             offset_rmse(&def, &c.truth, &ground, ed),
             offset_rmse(&hat, &c.truth, &ground, eh),
+            offset_rmse(&noise, &c.truth, &ground, en),
         ],
         sun: [
             median_offset(&def, &c.truth, &sun, ed),
             median_offset(&hat, &c.truth, &sun, eh),
+            median_offset(&noise, &c.truth, &sun, en),
         ],
     };
     (c, m)
@@ -358,7 +368,7 @@ pub fn run_all(seeds: &[u64]) -> Vec<Measured> {
         for &seed in seeds {
             let (c, m) = measure(seed, n);
             println!(
-                "{}: sky oracle {:.4} default {:.4} ({:.3}×) hat {:.4} ({:.3}×) noise {:.4} ({:.3}×); ground default {:.3} hat {:.3}; sun default {:+.2} hat {:+.2}",
+                "{}: sky oracle {:.4} noise {:.4} ({:.3}×) hat {:.4} ({:.3}×) noise on --method noise {:.4} ({:.3}×); ground {:.3} / {:.3} / {:.3}; sun {:+.2} / {:+.2} / {:+.2}",
                 c.label,
                 m.sky[0],
                 m.sky[1],
@@ -369,8 +379,10 @@ pub fn run_all(seeds: &[u64]) -> Vec<Measured> {
                 m.sky[3] / m.sky[0],
                 m.ground[0],
                 m.ground[1],
+                m.ground[2],
                 m.sun[0],
-                m.sun[1]
+                m.sun[1],
+                m.sun[2]
             );
             group.push(m);
         }
@@ -397,25 +409,29 @@ pub fn target(n: usize) -> f64 {
     }
 }
 
-/// What the noise-model merge reaches on the held-out seeds (the mean ratio per frame count, every
-/// count), with the default calibration (2000 samples stratified over the middle frame's codes,
-/// the noise-weighted fit, λ = 100): measured 1.017–1.074 (2 frames 1.074, 3 1.038, 4 1.030,
-/// 5 1.026, 6 1.017, 7 1.017, 8 1.050, 9 1.054), against 1.29–2.31 for the hat (the default
-/// merge). Before that calibration (100 grid samples, hat fit, λ = 30): 1.04–1.26 and 1.37–2.45.
-/// The issue's targets ([`target`]) are met at every count but 9 frames (1.054 against 1.05).
-pub const REACHED: f64 = 1.10;
+/// What the noise-model merge reaches on the held-out seeds with the default calibration (the
+/// mean ratio per frame count, every count): measured 1.04–1.26 (2 frames 1.17, 3 1.13, 4 1.12,
+/// 5 1.04, 6 1.12, 7 1.08, 8 1.26, 9 1.19), against 1.37–2.45 for the hat (the default merge).
+/// The rest of the gap is the calibrated curve's own error on 3-EV and low-full-well brackets.
+pub const REACHED: f64 = 1.30;
 
-/// The noise-model merge against the oracle on the held-out seeds: the mean ratio per frame count
-/// within [`REACHED`] (the issue's [`target`] printed beside it), never worse than the hat on
-/// any bracket's sky, on its dim ground (5 % allowance) or in its clipped sun (never darker).
+/// The same with the noise-weighted calibration (`--method noise`, opt-in): measured
+/// 1.017–1.074 (2 frames 1.074, 3 1.038, 4 1.030, 5 1.026, 6 1.017, 7 1.017, 8 1.050, 9 1.054):
+/// the issue's targets ([`target`]) met at every count but 9 frames.
+pub const REACHED_NOISE_FIT: f64 = 1.10;
+
+/// The noise-model merge against the oracle on the held-out seeds (default calibration): the mean
+/// ratio per frame count within [`REACHED`] (the issue's [`target`] printed beside it), never
+/// worse than the hat on any bracket's sky, on its dim ground (5 % allowance) or in its clipped
+/// sun (never darker).
 #[test]
 fn the_noise_merge_is_within_the_oracle_targets_on_held_out_brackets() {
-    let all = run_all(&HELD_OUT_SEEDS);
+    let all = held_out();
     for n in 2..=9 {
         let g: Vec<&Measured> = all.iter().filter(|m| m.n == n).collect();
         let mean = g.iter().map(|m| m.sky[1] / m.sky[0]).sum::<f64>() / g.len() as f64;
         println!(
-            "{n} frames: default {mean:.3}× the oracle (issue target {:.2}, {})",
+            "{n} frames: noise merge {mean:.3}× the oracle (issue target {:.2}, {})",
             target(n),
             if mean <= target(n) { "met" } else { "NOT met" }
         );
@@ -424,19 +440,9 @@ fn the_noise_merge_is_within_the_oracle_targets_on_held_out_brackets() {
             assert!(m.sky[1] <= m.sky[2] * 1.01, "{n} frames: {:?}", m.sky);
         }
     }
-    for m in &all {
-        // A named exception: in a two-frame bracket whose dim ground lies below the codes the
-        // samples measured, both merges read it from the curve's extrapolated toe and are more
-        // than a stop off; there the noise merge may be 1.25× the hat's error (held-out seeds
-        // 7001 and 7003 with the stratified noise-weighted calibration: 1.27 against 1.05 and
-        // 1.74 against 1.65 stops; 0.59 and 0.64 with the 100-sample hat fit before). Open.
-        let allowed = if m.n == 2 && m.ground[1] > 1.0 {
-            1.25 * m.ground[1]
-        } else {
-            1.05 * m.ground[1] + 0.005
-        };
+    for m in all {
         assert!(
-            m.ground[0] <= allowed,
+            m.ground[0] <= 1.05 * m.ground[1] + 0.005,
             "{} frames: dim ground {:?}",
             m.n,
             m.ground
@@ -448,6 +454,46 @@ fn the_noise_merge_is_within_the_oracle_targets_on_held_out_brackets() {
             m.sun
         );
     }
+}
+
+/// The noise-weighted calibration (`--method noise`) on the same held-out brackets: the noise
+/// merge on its curve within [`REACHED_NOISE_FIT`] of the oracle per frame count (sky), and no
+/// bracket's sky more than 5 % worse than on the default calibration's curve. Its dim ground and
+/// clipped sun are printed, not claimed: on two two-frame brackets whose ground lies below the
+/// codes the samples measured, its extrapolated toe reads the ground 1.27 and 1.74 stops off
+/// (default calibration 0.59 and 0.64), and on one six-frame bracket its curve's top reads the
+/// clipped sun 1.6 stops low (default 0.2) — measured reasons it is opt-in, not the default.
+#[test]
+fn the_noise_weighted_calibration_is_within_the_oracle_targets_on_held_out_brackets() {
+    let all = held_out();
+    for n in 2..=9 {
+        let g: Vec<&Measured> = all.iter().filter(|m| m.n == n).collect();
+        let mean = g.iter().map(|m| m.sky[3] / m.sky[0]).sum::<f64>() / g.len() as f64;
+        println!(
+            "{n} frames: --method noise {mean:.3}× the oracle (issue target {:.2}, {})",
+            target(n),
+            if mean <= target(n) { "met" } else { "NOT met" }
+        );
+        for m in &g {
+            println!(
+                "{n} frames: sky {:.4} (default calibration {:.4}); sun {:+.3} ({:+.3}); dim ground {:.3} stops ({:.3})",
+                m.sky[3], m.sky[1], m.sun[2], m.sun[0], m.ground[2], m.ground[0]
+            );
+        }
+        assert!(
+            mean <= REACHED_NOISE_FIT,
+            "{n} frames: mean ratio {mean:.3}"
+        );
+        for m in g {
+            assert!(m.sky[3] <= m.sky[1] * 1.05, "{n} frames: {:?}", m.sky);
+        }
+    }
+}
+
+/// The held-out measurements, computed once for both tests.
+fn held_out() -> &'static [Measured] {
+    static ALL: std::sync::OnceLock<Vec<Measured>> = std::sync::OnceLock::new();
+    ALL.get_or_init(|| run_all(&HELD_OUT_SEEDS))
 }
 
 /// The same measurement on the tuning seeds, printed (run with `--nocapture`); it asserts only
