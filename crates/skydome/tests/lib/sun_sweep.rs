@@ -356,19 +356,11 @@ fn score(s: &Scene) -> Score {
     spot.cd_per_m2 = skydome::photometry::patch_luminance(&s.image, &spot).expect("patch");
     let reading = truth_illuminance(s);
     let o = Options {
-        lens: LensSource::Profile(lens(t, true)),
-        sky: SkyOptions {
-            crop: true,
-            north_deg: Some(0.0),
-            sun: SunMode::Auto,
-            sun_disc: SunDisc::Reconstruct,
-            ..SkyOptions::default()
-        },
         reference: Reference {
             luminance: Some(spot),
             illuminance_lux: Some(reading),
         },
-        ..Options::default()
+        ..dome_options(t)
     };
     let dome = pipeline::run(
         Input::new(Frames::Decoded(frames)),
@@ -718,4 +710,20 @@ fn a_stations_day_finds_the_sun_wherever_visible() {
     let scores = score_all(&scenes);
     table("day", &scores);
     hold_to_targets("day", &scores, 1.0, 0.5);
+}
+
+/// The sweep's dome options (lens with its fall-off, crop, north up, the sun found and a
+/// clipped one rebuilt).
+fn dome_options(t: &Truth) -> Options {
+    Options {
+        lens: LensSource::Profile(lens(t, true)),
+        sky: SkyOptions {
+            crop: true,
+            north_deg: Some(0.0),
+            sun: SunMode::Auto,
+            sun_disc: SunDisc::Reconstruct,
+            ..SkyOptions::default()
+        },
+        ..Options::default()
+    }
 }

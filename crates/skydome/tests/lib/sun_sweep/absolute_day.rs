@@ -66,22 +66,6 @@ fn photograph_scene(scene: &Scene, s: Settings) -> Vec<DecodedFrame> {
         .collect()
 }
 
-/// The sweep's dome options (lens with its fall-off, crop, north up, the sun found and a
-/// clipped one rebuilt).
-fn dome_options(t: &Truth) -> Options {
-    Options {
-        lens: LensSource::Profile(lens(t, true)),
-        sky: SkyOptions {
-            crop: true,
-            north_deg: Some(0.0),
-            sun: SunMode::Auto,
-            sun_disc: SunDisc::Reconstruct,
-            ..SkyOptions::default()
-        },
-        ..Options::default()
-    }
-}
-
 fn run(frames: Vec<DecodedFrame>, o: &Options, name: &str) -> pipeline::Dome {
     pipeline::run(
         Input::new(Frames::Decoded(frames)),
