@@ -29,12 +29,10 @@ use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use skydome::batch::{self, CaptureRow, Grouping, ManifestRow, Shard};
 use skydome::bracket::{self, DecodeOptions, OrientationPolicy};
-use skydome::merge::Weighting;
-use skydome::pipeline::{self, EncodedFrame, Frames, Input, Options, Products, ResponseSource};
+use skydome::pipeline::{self, EncodedFrame, Frames, Input, Options, Products};
 
-use crate::calibrate::CalibArgs;
-use crate::geometry::GeometryArgs;
 use crate::io;
+use crate::merge::PipelineArgs;
 
 /// Arguments of `skydome batch`.
 #[derive(Debug, clap::Args)]
@@ -56,10 +54,6 @@ pub struct Args {
     /// Group K frames at a time in file-name order instead of by EXIF time.
     #[arg(long, value_name = "K")]
     pub frames_per_capture: Option<usize>,
-    /// UTC offset of the camera's clock (e.g. +02:00) for frames whose EXIF has none; it
-    /// overrides EXIF's OffsetTimeOriginal.
-    #[arg(long, value_name = "±HH:MM", allow_hyphen_values = true)]
-    pub time_zone: Option<String>,
     /// Also write each capture's tone-mapped preview (<capture>.jpg).
     #[arg(long)]
     pub preview: bool,
@@ -80,44 +74,19 @@ pub struct Args {
     /// Number of shards when the index comes from Kubernetes' JOB_COMPLETION_INDEX.
     #[arg(long, value_name = "N")]
     pub shards: Option<usize>,
-    /// A camera profile from `skydome calibrate`; without one, every capture calibrates itself.
-    #[arg(long, value_name = "camera.json")]
-    pub profile: Option<PathBuf>,
-    /// Where each dome's absolute scale comes from: `profile` (the profile's absolute constant,
-    /// made by `skydome merge --illuminance LUX --save-profile`, with each capture's EXIF time,
-    /// ISO and f-number; default), `exif` (the meter equation, ±30 %) or `none`.
-    #[arg(long, default_value = "profile", value_parser = crate::merge::parse_absolute)]
-    pub absolute: skydome::pipeline::AbsoluteMode,
-    /// Frame weighting: hat, noise or none (as `skydome merge`).
-    #[arg(long, default_value = "hat", value_parser = parse_weighting)]
-    pub weighting: Weighting,
-    /// Black level of the frames, 8-bit code.
-    #[arg(long, default_value_t = 0, value_name = "CODE")]
-    pub black_level: u8,
-    /// Align hand-held frames before merging.
-    #[arg(long)]
-    pub align: bool,
-    /// Ghost-aware merge (moving clouds); the ghost fraction goes to the table either way.
-    #[arg(long)]
-    pub ghosts: bool,
     /// EXIF orientation: apply or ignore.
     #[arg(long, default_value = "apply", value_parser = parse_orientation)]
     pub orientation: OrientationPolicy,
     /// Refuse images with more pixels than this.
     #[arg(long, default_value_t = DecodeOptions::default().max_pixels, value_name = "PIXELS")]
     pub max_pixels: u64,
+    /// How each capture becomes a dome (the same flags as `skydome merge`).
     #[command(flatten)]
-    pub calib: CalibArgs,
-    #[command(flatten)]
-    pub geometry: GeometryArgs,
+    pub run: PipelineArgs,
 }
 
 fn parse_shard(s: &str) -> Result<Shard, String> {
     s.parse().map_err(|e: batch::BatchError| e.to_string())
-}
-
-fn parse_weighting(s: &str) -> Result<Weighting, String> {
-    s.parse().map_err(|e: skydome::UnknownName| e.to_string())
 }
 
 fn parse_orientation(s: &str) -> Result<OrientationPolicy, String> {
@@ -209,11 +178,11 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         .output
         .clone()
         .ok_or_else(|| anyhow!("give the output folder with -o OUT"))?;
-    if a.geometry.time.is_some() {
+    if a.run.geometry.time.is_some() {
         bail!("--time: a batch takes each capture's time from EXIF; give --time-zone for cameras that do not write the UTC offset");
     }
     let shard = shard(&a)?;
-    let tz = match &a.time_zone {
+    let tz = match &a.run.time_zone {
         Some(s) => Some(bracket::parse_utc_offset(s).ok_or_else(|| {
             anyhow!("--time-zone '{s}': expected a UTC offset such as +02:00, -05:00 or Z")
         })?),
@@ -467,40 +436,19 @@ fn shard(a: &Args) -> Result<Shard> {
     Ok(Shard::ALL)
 }
 
-/// The pipeline options (as `skydome merge` maps the same flags); the per-capture time is added
-/// in [`process_one`].
+/// The pipeline options (`skydome merge`'s, from the same flags); the per-capture time is
+/// added in [`process_one`].
 fn options(a: &Args) -> Result<Options> {
-    let response = match &a.profile {
-        Some(p) => ResponseSource::Profile(crate::merge::read_profile(p)?),
-        None => ResponseSource::Calibrate(a.calib.options()),
-    };
-    Ok(Options {
-        response,
-        calibration_circle: a.calib.circle,
-        weighting: a.weighting,
-        black_level: a.black_level,
-        align: a.align,
-        consistency: false,
-        ghosts: a.ghosts,
-        lens: a.geometry.lens_source(a.calib.circle)?,
-        // Each capture's clock is read in the given zone by the pipeline itself (its report
-        // then says the time came from EXIF and the flag).
-        sky: pipeline::SkyOptions {
-            time_zone: a.time_zone.clone(),
-            ..a.geometry.sky()
+    let products = a.run.geometry.products(
+        Products {
+            preview: a.preview,
+            ..Products::default()
         },
-        products: a.geometry.products(
-            Products {
-                preview: a.preview,
-                ..Products::default()
-            },
-            false,
-            false,
-            a.equirect,
-        ),
-        reference: Default::default(),
-        absolute: a.absolute,
-    })
+        false,
+        false,
+        a.equirect,
+    );
+    a.run.options(products)
 }
 
 /// The options' fingerprint: everything that changes an output byte.
@@ -508,7 +456,7 @@ fn fingerprint(a: &Args, o: &Options) -> Result<String> {
     let all = serde_json::json!({
         "skydome": skydome::VERSION,
         "options": o,
-        "time_zone": a.time_zone,
+        "time_zone": a.run.time_zone,
         "orientation": a.orientation.name(),
         "max_pixels": a.max_pixels,
     });

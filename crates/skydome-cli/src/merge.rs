@@ -25,21 +25,12 @@ pub struct Args {
     /// The radiance map to write (.hdr Radiance RGBE, or .exr).
     #[arg(short, long)]
     pub output: PathBuf,
-    /// A camera profile from `skydome calibrate`; without one, the bracket calibrates itself.
-    #[arg(long, value_name = "camera.json")]
-    pub profile: Option<PathBuf>,
     /// Write the camera profile: the response calibrated on this bracket (or the --profile
     /// given) and, when --illuminance, --luminance or --absolute exif made the dome absolute,
     /// the camera's absolute constant, so that every later merge with this profile and EXIF
     /// time, ISO and f-number is absolute without a meter.
     #[arg(long, value_name = "camera.json")]
     pub save_profile: Option<PathBuf>,
-    /// Where the absolute scale comes from without a meter reading: `profile` (the profile's
-    /// absolute constant with EXIF time, ISO and f-number, when it has one; default), `exif`
-    /// (the reflected-light meter equation, K = 12.5: an estimate within ±30 %, labelled so) or
-    /// `none` (relative).
-    #[arg(long, default_value = "profile", value_parser = parse_absolute)]
-    pub absolute: AbsoluteMode,
     /// Also write an OpenEXR file.
     #[arg(long, value_name = "FILE.exr")]
     pub exr: Option<PathBuf>,
@@ -54,12 +45,6 @@ pub struct Args {
     /// measured). In the input photos' pixels.
     #[arg(long, value_name = "FILE.png|FILE.exr")]
     pub confidence: Option<PathBuf>,
-    /// Frame weighting: `hat` (robust, default), `noise` (inverse variance under a camera noise
-    /// model estimated from the bracket or read from the profile: 1.04–1.26× the oracle's error
-    /// where the hat is 1.37–2.45×, at about 5× the hat's merge time) or `none` (the seed's
-    /// unweighted eq. 4).
-    #[arg(long, default_value = "hat", value_parser = parse_weighting)]
-    pub weighting: Weighting,
     /// A spot-meter reading that makes the radiance absolute: the luminance in cd/m² of the
     /// patch around pixel X,Y of the input photos (origin top-left).
     #[arg(long, value_name = "X,Y=CD", value_parser = parse_spot)]
@@ -67,14 +52,52 @@ pub struct Args {
     /// Radius in pixels of the patch --luminance averages.
     #[arg(long, default_value_t = 3.0, value_name = "PX")]
     pub luminance_radius: f64,
-    /// The UTC offset (+02:00, -05:00, Z) the camera's clock (EXIF DateTimeOriginal) is read
-    /// in, for cameras that write no OffsetTimeOriginal; it overrides EXIF's offset.
-    #[arg(long, value_name = "OFFSET", allow_hyphen_values = true)]
-    pub time_zone: Option<String>,
     /// Horizontal illuminance in lux measured beside the camera: makes the radiance absolute
     /// (with --luminance too, the disagreement is reported). Needs a fish-eye lens.
     #[arg(long, value_name = "LUX")]
     pub illuminance: Option<f64>,
+    /// Write where frames disagree beyond their noise as a PNG (white = disagree); the
+    /// fraction is always reported with it.
+    #[arg(long, value_name = "FILE.png")]
+    pub consistency: Option<PathBuf>,
+    #[command(flatten)]
+    pub bracket: BracketArgs,
+    #[command(flatten)]
+    pub run: PipelineArgs,
+    #[command(flatten)]
+    pub maps: MapOutputs,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Replace existing output files.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// The flags that choose how a bracket becomes a dome, shared by `skydome merge` and
+/// `skydome batch` (one definition, so both read them alike).
+#[derive(Debug, clap::Args)]
+pub struct PipelineArgs {
+    /// A camera profile from `skydome calibrate`; without one, each bracket
+    /// calibrates itself.
+    #[arg(long, value_name = "camera.json")]
+    pub profile: Option<PathBuf>,
+    /// Where the absolute scale comes from without a meter reading: `profile` (the profile's
+    /// absolute constant with EXIF time, ISO and f-number, when it has one; default), `exif`
+    /// (the reflected-light meter equation, K = 12.5: an estimate within ±30 %, labelled so) or
+    /// `none` (relative).
+    #[arg(long, default_value = "profile", value_parser = parse_absolute)]
+    pub absolute: AbsoluteMode,
+    /// Frame weighting: `hat` (robust, default), `noise` (inverse variance under a camera noise
+    /// model estimated from the bracket or read from the profile: 1.04–1.26× the oracle's error
+    /// where the hat is 1.37–2.45×, at about 5× the hat's merge time) or `none` (the seed's
+    /// unweighted eq. 4).
+    #[arg(long, default_value = "hat", value_parser = parse_weighting)]
+    pub weighting: Weighting,
+    /// The UTC offset (+02:00, -05:00, Z) the camera's clock (EXIF DateTimeOriginal) is read
+    /// in, for cameras that write no OffsetTimeOriginal; it overrides EXIF's offset.
+    #[arg(long, value_name = "OFFSET", allow_hyphen_values = true)]
+    pub time_zone: Option<String>,
     /// Black level of the frames, 8-bit code (e.g. 16 for a film scan): codes at or below
     /// count as black.
     #[arg(long, default_value_t = 0, value_name = "CODE")]
@@ -86,24 +109,40 @@ pub struct Args {
     /// most frames agree on instead of a blend of two scenes.
     #[arg(long)]
     pub ghosts: bool,
-    /// Write where frames disagree beyond their noise as a PNG (white = disagree); the
-    /// fraction is always reported with it.
-    #[arg(long, value_name = "FILE.png")]
-    pub consistency: Option<PathBuf>,
-    #[command(flatten)]
-    pub bracket: BracketArgs,
     #[command(flatten)]
     pub calib: CalibArgs,
     #[command(flatten)]
     pub geometry: GeometryArgs,
-    #[command(flatten)]
-    pub maps: MapOutputs,
-    /// Print a JSON summary on stdout.
-    #[arg(long)]
-    pub json: bool,
-    /// Replace existing output files.
-    #[arg(long)]
-    pub force: bool,
+}
+
+impl PipelineArgs {
+    /// The pipeline options these flags give, with `products` asked for; no meter reading and
+    /// no consistency map (the callers add theirs).
+    pub fn options(&self, products: Products) -> Result<Options> {
+        let response = match &self.profile {
+            Some(p) => ResponseSource::Profile(read_profile(p)?),
+            None => ResponseSource::Calibrate(self.calib.options()),
+        };
+        Ok(Options {
+            response,
+            calibration_circle: self.calib.circle,
+            weighting: self.weighting,
+            black_level: self.black_level,
+            align: self.align,
+            consistency: false,
+            ghosts: self.ghosts,
+            lens: self.geometry.lens_source(self.calib.circle)?,
+            // The camera's clock is read in the given zone by the pipeline itself (its report
+            // then says the time came from EXIF and the flag).
+            sky: SkyOptions {
+                time_zone: self.time_zone.clone(),
+                ..self.geometry.sky()
+            },
+            products,
+            reference: Reference::default(),
+            absolute: self.absolute,
+        })
+    }
 }
 
 /// Parses a merge weighting name.
@@ -148,7 +187,12 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     .chain(a.save_profile.as_ref())
     .collect();
     // The profile read is an input too: an updated profile goes to a new file.
-    let inputs: Vec<PathBuf> = a.images.iter().chain(a.profile.as_ref()).cloned().collect();
+    let inputs: Vec<PathBuf> = a
+        .images
+        .iter()
+        .chain(a.run.profile.as_ref())
+        .cloned()
+        .collect();
     for o in &outs {
         io::check_destination(o, &inputs, a.force)?;
     }
@@ -157,7 +201,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     let mut bar = io::StageBar::new(quiet);
     let mut dome = pipeline::run(input, &options, &mut |p| bar.show(p)).map_err(io::hint)?;
     bar.finish();
-    if let Some(p) = &a.profile {
+    if let Some(p) = &a.run.profile {
         dome.report.response = format!("profile {}", p.display());
     }
     for w in &dome.report.warnings {
@@ -183,34 +227,20 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
 
 /// The pipeline options for the command line.
 fn options(a: &Args) -> Result<Options> {
-    let response = match &a.profile {
-        Some(p) => ResponseSource::Profile(read_profile(p)?),
-        None => ResponseSource::Calibrate(a.calib.options()),
-    };
-    Ok(Options {
-        response,
-        calibration_circle: a.calib.circle,
-        weighting: a.weighting,
-        black_level: a.black_level,
-        align: a.align,
-        consistency: a.consistency.is_some(),
-        ghosts: a.ghosts,
-        lens: a.geometry.lens_source(a.calib.circle)?,
-        sky: SkyOptions {
-            time_zone: a.time_zone.clone(),
-            ..a.geometry.sky()
+    let r = &a.run;
+    let products = r.geometry.products(
+        Products {
+            preview: a.preview.is_some(),
+            confidence: a.confidence.is_some(),
+            consistency: a.consistency.is_some(),
+            ..Products::default()
         },
-        products: a.geometry.products(
-            Products {
-                preview: a.preview.is_some(),
-                confidence: a.confidence.is_some(),
-                consistency: a.consistency.is_some(),
-                ..Products::default()
-            },
-            a.maps.overlay.is_some(),
-            a.maps.angular.is_some(),
-            a.maps.equirect.is_some(),
-        ),
+        a.maps.overlay.is_some(),
+        a.maps.angular.is_some(),
+        a.maps.equirect.is_some(),
+    );
+    Ok(Options {
+        consistency: a.consistency.is_some(),
         reference: Reference {
             luminance: a.luminance.map(|(x, y, cd)| SpotLuminance {
                 pixel: PixelPoint { x, y },
@@ -219,7 +249,7 @@ fn options(a: &Args) -> Result<Options> {
             }),
             illuminance_lux: a.illuminance,
         },
-        absolute: a.absolute,
+        ..r.options(products)?
     })
 }
 
