@@ -10,16 +10,9 @@ const BIN: &str = env!("CARGO_BIN_EXE_skydome");
 
 /// The synthetic lens (a 235° circle), cropped to the dome; no sun (the synthetic sky has no
 /// real one to rebuild).
-const DOME: &[&str] = &[
-    "--fisheye",
-    "--lens-model",
-    "equidistant",
-    "--fov",
-    "235",
-    "--crop",
-    "--sun",
-    "none",
-];
+fn dome() -> Vec<&'static str> {
+    [crate::SYNTH_DOME, &["--sun", "none"]].concat()
+}
 
 fn skydome(args: &[&str]) -> Output {
     Command::new(BIN)
@@ -66,7 +59,7 @@ fn merge(frames: &[PathBuf], out: &Path, extra: &[&str]) -> Output {
     let mut args: Vec<String> = vec!["merge".into()];
     args.extend(frames.iter().map(|p| p.display().to_string()));
     args.extend(["-o".into(), out.display().to_string(), "--json".into()]);
-    args.extend(DOME.iter().map(|s| s.to_string()));
+    args.extend(dome().iter().map(|s| s.to_string()));
     args.extend(extra.iter().map(|s| s.to_string()));
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     skydome(&args)
@@ -138,7 +131,7 @@ fn one_reading_makes_every_later_merge_and_batch_absolute() {
         "--profile",
         cam_s,
     ];
-    args.extend(DOME);
+    args.extend(dome());
     let o = skydome(&args);
     assert!(o.status.success(), "{}", text(&o));
     let lines = std::fs::read_to_string(out.join("captures.jsonl")).unwrap();

@@ -7,15 +7,7 @@ use std::process::{Command, Output};
 
 const BIN: &str = env!("CARGO_BIN_EXE_skydome");
 
-/// The fish-eye options every batch here runs with (the synthetic lens is a 235° circle).
-const DOME: &[&str] = &[
-    "--fisheye",
-    "--lens-model",
-    "equidistant",
-    "--fov",
-    "235",
-    "--crop",
-];
+use crate::SYNTH_DOME as DOME;
 
 fn skydome(args: &[&str]) -> Output {
     Command::new(BIN).args(args).output().unwrap()

@@ -8,14 +8,7 @@ use std::path::Path;
 use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_skydome");
-const DOME: &[&str] = &[
-    "--fisheye",
-    "--lens-model",
-    "equidistant",
-    "--fov",
-    "235",
-    "--crop",
-];
+use crate::SYNTH_DOME as DOME;
 
 /// True when a Slurm cluster answers; otherwise the skip is reported through the shared guard
 /// (a failure when `SKYDOME_REQUIRE_SLURM=1`, as in CI).

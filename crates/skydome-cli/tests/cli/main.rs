@@ -5,6 +5,17 @@
 #[path = "../../../skydome/tests/common/mod.rs"]
 mod common;
 
+/// The fish-eye options for the synthetic lens (`skydome synth`'s 235° equidistant circle),
+/// cropped to the dome.
+pub const SYNTH_DOME: &[&str] = &[
+    "--fisheye",
+    "--lens-model",
+    "equidistant",
+    "--fov",
+    "235",
+    "--crop",
+];
+
 mod absolute;
 mod bad_input;
 mod batch;
