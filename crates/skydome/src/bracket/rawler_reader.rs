@@ -54,6 +54,7 @@ pub fn decode_with_rawler(
         file: name.to_string(),
         reason,
     };
+    check_tiff_sizes(bytes).map_err(bad)?;
     let src = RawSource::new_from_slice(bytes);
     let params = RawDecodeParams::default();
     let loader = rawler::global_loader();
@@ -92,6 +93,88 @@ pub fn decode_with_rawler(
     // Sensor order: the CFA phase must survive (see `dng`'s module docs).
     frame.info.orientation = 1;
     Ok((frame, colour))
+}
+
+/// Refuses a TIFF-structured file (CR2, NEF, ARW, PEF, DNG, ORF, RW2, …) one of whose IFD
+/// entries announces more data than the whole file holds.
+///
+/// rawler allocates an entry's values from its count before reading them, so a count of a few
+/// billion makes it ask for tens of gigabytes; an allocation failure aborts the process (in
+/// stable Rust it is not a panic, and [`catch_unwind`] cannot catch it). Every IFD reachable
+/// from the header is checked here first: the IFD chain, SubIFDs, the EXIF, GPS and Interop
+/// IFDs. Makernotes (vendor layouts) and the TIFF blocks inside CR3 and RAF containers are not
+/// reached; such a file can still exhaust memory inside rawler (README, "Camera RAW").
+fn check_tiff_sizes(bytes: &[u8]) -> Result<(), String> {
+    let big = match bytes.get(..2) {
+        Some(b"II") => false,
+        Some(b"MM") => true,
+        _ => return Ok(()),
+    };
+    let u16_at = |o: usize| -> Option<u16> {
+        let b = bytes.get(o..o.checked_add(2)?)?;
+        Some(if big {
+            u16::from_be_bytes([b[0], b[1]])
+        } else {
+            u16::from_le_bytes([b[0], b[1]])
+        })
+    };
+    let u32_at = |o: usize| -> Option<u32> {
+        let b = bytes.get(o..o.checked_add(4)?)?;
+        Some(if big {
+            u32::from_be_bytes([b[0], b[1], b[2], b[3]])
+        } else {
+            u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        })
+    };
+    let Some(first) = u32_at(4) else {
+        return Ok(());
+    };
+    let len = bytes.len() as u64;
+    let mut todo = vec![first as usize];
+    let mut seen = std::collections::HashSet::new();
+    while let Some(at) = todo.pop() {
+        if at == 0 || !seen.insert(at) || seen.len() > 256 {
+            continue;
+        }
+        let Some(n) = u16_at(at) else { continue };
+        for i in 0..usize::from(n) {
+            let e = at + 2 + 12 * i;
+            let (Some(tag), Some(kind), Some(count)) = (u16_at(e), u16_at(e + 2), u32_at(e + 4))
+            else {
+                break;
+            };
+            // The largest element size rawler reads for any type is 8 bytes.
+            let size: u64 = match kind {
+                1 | 2 | 6 | 7 => 1,
+                3 | 8 => 2,
+                4 | 9 | 11 | 13 => 4,
+                _ => 8,
+            };
+            let total = u64::from(count) * size;
+            if total > len {
+                return Err(format!(
+                    "camera RAW: TIFF tag {tag} announces {total} bytes of data in a {len}-byte file (corrupt?)"
+                ));
+            }
+            // Sub-IFDs: SubIFDs, EXIF, GPS, Interop.
+            if matches!(tag, 330 | 34665 | 34853 | 40965) && matches!(kind, 4 | 13) {
+                let values = if total <= 4 {
+                    e + 8
+                } else {
+                    u32_at(e + 8).unwrap_or(0) as usize
+                };
+                for k in 0..(count as usize).min(16) {
+                    if let Some(o) = u32_at(values + 4 * k) {
+                        todo.push(o as usize);
+                    }
+                }
+            }
+        }
+        if let Some(next) = u32_at(at + 2 + 12 * usize::from(n)) {
+            todo.push(next as usize);
+        }
+    }
+    Ok(())
 }
 
 /// rawler's error as one line.

@@ -163,20 +163,30 @@ pub fn ljpeg(samples: &[u16], w: usize, h: usize, comps: usize, bits: usize) -> 
         o.extend_from_slice(&[c as u8 + 1, 0x00]);
     }
     o.extend_from_slice(&[1, 0, 0]);
-    // Entropy-coded data.
-    let mut bitbuf = Vec::new();
-    let (mut acc, mut have) = (0u64, 0usize);
-    let mut put = |v: u32, n: usize, out: &mut Vec<u8>| {
-        acc = (acc << n) | u64::from(v & ((1u32 << n) - 1) as u32);
-        have += n;
-        while have >= 8 {
-            have -= 8;
-            let b = (acc >> have) as u8;
-            out.push(b);
-            if b == 0xFF {
-                out.push(0);
+    // Entropy-coded data (0xFF bytes stuffed with 0x00).
+    struct Bits {
+        out: Vec<u8>,
+        acc: u64,
+        have: usize,
+    }
+    impl Bits {
+        fn put(&mut self, v: u32, n: usize) {
+            self.acc = (self.acc << n) | u64::from(v & ((1u32 << n) - 1));
+            self.have += n;
+            while self.have >= 8 {
+                self.have -= 8;
+                let b = (self.acc >> self.have) as u8;
+                self.out.push(b);
+                if b == 0xFF {
+                    self.out.push(0);
+                }
             }
         }
+    }
+    let mut bits_out = Bits {
+        out: Vec::new(),
+        acc: 0,
+        have: 0,
     };
     let at = |x: usize, y: usize, c: usize| i32::from(samples[(y * w + x) * comps + c]);
     for y in 0..h {
@@ -196,19 +206,20 @@ pub fn ljpeg(samples: &[u16], w: usize, h: usize, comps: usize, bits: usize) -> 
                 } else {
                     32 - d.unsigned_abs().leading_zeros()
                 } as usize;
-                put(cat as u32, 5, &mut bitbuf);
+                bits_out.put(cat as u32, 5);
                 if cat > 0 && cat < 16 {
                     let extra = if d < 0 { d - 1 } else { d };
-                    put(extra as u32, cat, &mut bitbuf);
+                    bits_out.put(extra as u32, cat);
                 }
             }
         }
     }
-    // Pad with ones.
-    if have > 0 {
-        let n = 8 - have;
-        put((1 << n) - 1, n, &mut bitbuf);
+    // Pad the last byte with ones.
+    if bits_out.have > 0 {
+        let n = 8 - bits_out.have;
+        bits_out.put((1 << n) - 1, n);
     }
+    let bitbuf = bits_out.out;
     o.extend(bitbuf);
     o.extend_from_slice(&[0xFF, 0xD9]);
     o
