@@ -1,3 +1,4 @@
+#![allow(dead_code)] // the fuzz seeds use `seeds`, the tests `specs`
 //! Small DNGs in every layout `bracket::dng` reads, for the tests and the fuzzers' `read_dng`
 //! corpus (`fuzz/examples/seeds.rs` includes this file): strips and
 //! tiles, 8/16-bit and bit-packed 12/14-bit samples, lossless JPEG (one and three components),
