@@ -5,6 +5,8 @@
 
 #[path = "../../crates/skydome/tests/common/encode.rs"]
 mod encode;
+#[path = "../../crates/skydome/tests/common/dng.rs"]
+mod dng;
 
 use std::path::Path;
 
@@ -131,6 +133,9 @@ fn main() {
         b"# times\nframe_0.jpg 1/1000\nframe_1.jpg 0.004\n\nframe_2.jpg 2 # long\n",
     );
     put("times", "exif_date", b"2026:06:21 14:30:05");
+    for (name, bytes) in dng::seeds() {
+        put("read_dng", &format!("{name}.dng"), &bytes);
+    }
     put("times", "iso8601", b"2026-06-21T14:30:05+02:00");
 
     let mut p = CameraProfile::linear();

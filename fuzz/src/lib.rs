@@ -45,6 +45,55 @@ pub fn decode_frame(data: &[u8]) {
     );
 }
 
+/// A DNG through our own reader (`bracket::dng::decode_dng`: the IFD walk, strips and tiles,
+/// bit-packed samples, lossless JPEG, linearisation table, black and white levels, active area,
+/// CFA, colour matrix, EXIF), then a two-frame RAW bracket of it; with the `raw-rawler` feature
+/// the same bytes through rawler (`bracket::decode_with_rawler`), whose panics must be caught.
+pub fn read_dng(data: &[u8]) {
+    let opts = DecodeOptions {
+        max_pixels: MAX_PIXELS,
+    };
+    if let Ok((frame, colour)) = bracket::dng::decode_dng("fuzz.dng", data, &opts) {
+        check_raw_frame(&frame, &colour);
+        let mut other = frame.clone();
+        other.name = "fuzz-2.dng".into();
+        let _ = bracket::assemble(
+            vec![frame, other],
+            Some(&[0.01, 0.04]),
+            OrientationPolicy::Apply,
+        );
+    }
+    #[cfg(feature = "raw-rawler")]
+    if let Ok((frame, colour)) = bracket::decode_with_rawler("fuzz.raw", data, &opts) {
+        check_raw_frame(&frame, &colour);
+    }
+}
+
+/// What every decoded RAW frame must satisfy.
+fn check_raw_frame(frame: &bracket::DecodedFrame, colour: &bracket::RawColour) {
+    assert_eq!(
+        frame.pixels.len(),
+        3 * frame.width * frame.height,
+        "decoded samples do not match the size"
+    );
+    assert!(
+        (frame.width as u64) * (frame.height as u64) <= MAX_PIXELS,
+        "a frame above the pixel limit was decoded"
+    );
+    assert!(
+        colour
+            .camera_to_rec709
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite()),
+        "non-finite colour matrix {:?}",
+        colour.camera_to_rec709
+    );
+    if let Some(p) = colour.cfa {
+        assert!(p.iter().all(|&c| c < 3), "CFA {p:?}");
+    }
+}
+
 /// A Radiance `.hdr` (RGBE or XYZE, flat or run-length encoded, any header), as `compare` and
 /// `info` read it.
 pub fn read_hdr(data: &[u8]) {

@@ -84,3 +84,40 @@ fn merge_reads_a_dng_bracket_and_writes_the_standard_error() {
     assert_eq!(img.height(), 300, "padded to the scale bar's height");
     assert_eq!(img.width(), 96 + 150, "the map and its scale bar");
 }
+
+/// A camera RAW file in a build without the `raw-rawler` feature: one line naming the file and
+/// saying how to read it, exit status 1, nothing written.
+#[cfg(not(feature = "raw-rawler"))]
+#[test]
+fn merge_refuses_camera_raw_without_the_feature_in_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = synth::scene(32, 32, 7, None);
+    let files = synth::raw_bracket(&scene, &RawSynthOptions::default()).unwrap();
+    let mut paths = Vec::new();
+    for (name, bytes) in &files {
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        paths.push(p.display().to_string());
+    }
+    // The second frame a Canon CR2 (its signature is enough to be recognised).
+    let mut cr2 = b"II*\0\x10\0\0\0CR\x02\0\0\0\0\0".to_vec();
+    cr2.resize(256, 0);
+    let cr2_path = dir.path().join("IMG_0002.CR2");
+    std::fs::write(&cr2_path, &cr2).unwrap();
+    paths[1] = cr2_path.display().to_string();
+    let out = dir.path().join("sky.hdr");
+    let o = Command::new(BIN)
+        .arg("merge")
+        .args(&paths)
+        .args(["-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("IMG_0002.CR2") && err.contains("raw-rawler"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}

@@ -5,7 +5,8 @@ use std::io::Cursor;
 
 use super::{exif::read_exif, BracketError, DecodeOptions, DecodedFrame, Pixels, RawColour};
 
-/// Decodes one encoded image (JPEG, PNG, TIFF or DNG) and reads its EXIF.
+/// Decodes one encoded image (JPEG, PNG, TIFF or DNG; camera RAW with the `raw-rawler` feature)
+/// and reads its EXIF.
 ///
 /// Pixels stay in stored order; [`assemble`](super::assemble) applies orientation once the whole
 /// bracket is known. A DNG gives its demosaiced camera-RGB codes ([`super::dng`]); use
@@ -18,7 +19,9 @@ pub fn decode(
     decode_raw(name, bytes, opts).map(|(f, _)| f)
 }
 
-/// As [`decode`], with the colour of a DNG (`None` for every other format).
+/// As [`decode`], with the colour of a RAW frame (DNG, or camera RAW with the `raw-rawler`
+/// feature; `None` for every other format). Camera RAW files are recognised by
+/// [`super::camera_raw_kind`]; without the feature they are refused with a message saying so.
 pub fn decode_raw(
     name: &str,
     bytes: &[u8],
@@ -31,6 +34,19 @@ pub fn decode_raw(
     }
     if super::dng::is_dng(bytes) {
         return super::dng::decode_dng(name, bytes, opts).map(|(f, c)| (f, Some(c)));
+    }
+    if let Some(kind) = super::camera_raw::camera_raw_kind(name, bytes) {
+        #[cfg(all(feature = "raw-rawler", not(target_arch = "wasm32")))]
+        {
+            let _ = kind;
+            return super::rawler_reader::decode_with_rawler(name, bytes, opts)
+                .map(|(f, c)| (f, Some(c)));
+        }
+        #[cfg(not(all(feature = "raw-rawler", not(target_arch = "wasm32"))))]
+        return Err(BracketError::CameraRawUnsupported {
+            file: name.to_string(),
+            kind: kind.to_string(),
+        });
     }
     decode_picture(name, bytes, opts).map(|f| (f, None))
 }

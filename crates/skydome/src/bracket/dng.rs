@@ -315,9 +315,8 @@ pub fn decode_dng(
     if aw < 4 || ah < 4 {
         return Err(bad("DNG active area below 4 × 4 pixels".into()));
     }
-    // Normalised values and clipped flags, spp per pixel.
+    // Normalised values, spp per pixel.
     let mut v = vec![0f32; aw * ah * spp];
-    let mut clip = vec![false; aw * ah * spp];
     for y in 0..ah {
         for x in 0..aw {
             for s in 0..spp {
@@ -325,32 +324,82 @@ pub fn decode_dng(
                 let lin = levels.linearise(r);
                 let plane = if linear_raw { s } else { 0 };
                 let (black, white) = levels.at(x + x0, y + y0, plane);
-                let n = (lin - black) / (white - black).max(1e-6);
-                let k = (y * aw + x) * spp + s;
-                v[k] = n;
-                clip[k] = n >= CLIP_FRACTION;
+                v[(y * aw + x) * spp + s] = (lin - black) / (white - black).max(1e-6);
             }
         }
     }
-    let rgb = match cfa {
-        Some(p) => demosaic_bilinear(&v, &clip, aw, ah, p),
-        None => v.iter().zip(&clip).map(|(&v, &c)| raw_code(v, c)).collect(),
-    };
     let (matrix, from) = camera_matrix(&first, &ifd);
-    let neutral = as_shot_neutral(&first, &ifd);
-    let colour = RawColour {
+    let sensor = SensorImage {
+        width: aw,
+        height: ah,
+        values: v,
         cfa,
-        camera_to_rec709: camera_to_rec709(matrix.as_ref(), neutral),
-        as_shot_neutral: neutral,
+        matrix,
         matrix_from: from,
+        as_shot_neutral: as_shot_neutral(&first, &ifd),
         black_level: levels.black.first().copied().unwrap_or(0.0),
         white_level: levels.white.first().copied().unwrap_or(0.0),
     };
-    let mut frame = DecodedFrame::new(name, aw, ah, Pixels::U16(rgb));
+    let (mut frame, colour) = sensor.develop(name);
     super::exif::read_exif(bytes, &mut frame);
     // Sensor order: the CFA phase must survive (see the module docs).
     frame.info.orientation = 1;
     Ok((frame, colour))
+}
+
+/// A RAW image as a reader hands it over, before demosaicing: the active area's photosites
+/// normalised to `v = (raw − black) / (white − black)`, and the colour metadata. Both readers
+/// (this module's DNG reader and, under the `raw-rawler` feature, `rawler` for camera formats)
+/// end here, so every RAW frame is clipped, demosaiced and encoded the same way.
+pub(super) struct SensorImage {
+    /// Width of the active area in photosites.
+    pub width: usize,
+    /// Height of the active area in photosites.
+    pub height: usize,
+    /// Normalised values, row-major from the top-left photosite: one per photosite for a CFA
+    /// image, three (camera R, G, B) per pixel for LinearRaw.
+    pub values: Vec<f32>,
+    /// The 2 × 2 pattern from the top-left photosite of the active area (0 R, 1 G, 2 B), `None`
+    /// for LinearRaw.
+    pub cfa: Option<[u8; 4]>,
+    /// The XYZ → camera matrix (rows camera R, G, B), `None` when the file has none.
+    pub matrix: Option<[[f64; 3]; 3]>,
+    /// Where the matrix came from, for the report.
+    pub matrix_from: String,
+    /// The camera's as-shot neutral (camera values of a neutral surface, green 1).
+    pub as_shot_neutral: [f32; 3],
+    /// Black level (raw sensor units), for the report.
+    pub black_level: f32,
+    /// White level (raw sensor units), for the report.
+    pub white_level: f32,
+}
+
+impl SensorImage {
+    /// Clipping ([`CLIP_FRACTION`]), bilinear demosaicing of a CFA image and the 16-bit codes
+    /// of the module docs; the colour from the matrix and the white balance. The frame has no
+    /// EXIF yet (the caller reads it) and orientation 1 (sensor order).
+    pub(super) fn develop(self, name: &str) -> (DecodedFrame, RawColour) {
+        let clip: Vec<bool> = self.values.iter().map(|&n| n >= CLIP_FRACTION).collect();
+        let (w, h) = (self.width, self.height);
+        let rgb = match self.cfa {
+            Some(p) => demosaic_bilinear(&self.values, &clip, w, h, p),
+            None => self
+                .values
+                .iter()
+                .zip(&clip)
+                .map(|(&v, &c)| raw_code(v, c))
+                .collect(),
+        };
+        let colour = RawColour {
+            cfa: self.cfa,
+            camera_to_rec709: camera_to_rec709(self.matrix.as_ref(), self.as_shot_neutral),
+            as_shot_neutral: self.as_shot_neutral,
+            matrix_from: self.matrix_from,
+            black_level: self.black_level,
+            white_level: self.white_level,
+        };
+        (DecodedFrame::new(name, w, h, Pixels::U16(rgb)), colour)
+    }
 }
 
 /// The 2 × 2 CFA pattern (0 R, 1 G, 2 B); other sizes and colours are refused.

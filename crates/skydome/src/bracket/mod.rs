@@ -1,7 +1,8 @@
 //! A bracket: decoded frames of one still scene at different exposures.
 //!
 //! This module turns encoded photos (JPEG, PNG, TIFF; 8 or 16 bits per channel; grey is promoted
-//! to RGB; DNG RAW files, see [`dng`]) into [`Frame`]s, reads their exposure from EXIF (or takes it from the caller), and
+//! to RGB; DNG RAW files, see [`dng`]; camera RAW files with the opt-in `raw-rawler` feature, see
+//! `rawler_reader`) into [`Frame`]s, reads their exposure from EXIF (or takes it from the caller), and
 //! validates the set before anything downstream sees it:
 //!
 //! - at least two frames, all of the same size and bit depth;
@@ -21,13 +22,17 @@
 //!
 //! Pixel conventions are those of [`crate::image`]: origin top-left, `x` right, `y` down.
 
+mod camera_raw;
 mod checks;
 mod decode;
 pub mod dng;
 mod exif;
+#[cfg(all(feature = "raw-rawler", not(target_arch = "wasm32")))]
+pub mod rawler_reader;
 pub mod tiff;
 mod times;
 
+pub use camera_raw::camera_raw_kind;
 pub use checks::{assemble, assemble_with_black_level};
 pub use decode::{check_jpeg_complete, decode, decode_raw};
 pub use dng::{is_dng, RawColour};
@@ -35,6 +40,8 @@ pub use exif::{
     format_exif_datetime, format_iso8601_utc, parse_exif_datetime, parse_iso8601, parse_utc_offset,
     read_metadata, FileMetadata,
 };
+#[cfg(all(feature = "raw-rawler", not(target_arch = "wasm32")))]
+pub use rawler_reader::decode_with_rawler;
 pub use times::{parse_list_file, parse_time, parse_times, times_from_list};
 
 use thiserror::Error;
@@ -336,6 +343,14 @@ pub enum BracketError {
     UnsupportedFormat {
         /// File name.
         file: String,
+    },
+    /// A camera RAW file (CR2, NEF, …) in a build without camera RAW support.
+    #[error("{file}: a {kind} camera RAW file; this skydome was built without camera RAW support (build it with the `raw-rawler` feature, or convert the files to DNG, e.g. with dnglab or Adobe DNG Converter)")]
+    CameraRawUnsupported {
+        /// File name.
+        file: String,
+        /// The format (`"CR2"`, `"NEF"`, …).
+        kind: String,
     },
     /// Some frames are RAW (DNG) and others are not.
     #[error("{file}: a bracket is all RAW (DNG) or all pictures (JPEG, PNG, TIFF); this frame is not like the first")]

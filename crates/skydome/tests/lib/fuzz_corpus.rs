@@ -30,6 +30,11 @@ fn decode_frame_corpus_replays() {
 }
 
 #[test]
+fn read_dng_corpus_replays() {
+    replay("read_dng", targets::read_dng);
+}
+
+#[test]
 fn read_hdr_corpus_replays() {
     replay("read_hdr", targets::read_hdr);
 }

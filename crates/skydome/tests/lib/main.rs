@@ -5,6 +5,8 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+#[path = "../common/dng.rs"]
+mod dng_build;
 #[path = "../common/encode.rs"]
 mod encode;
 #[path = "../fisheye_support/mod.rs"]
@@ -34,6 +36,7 @@ mod oracle;
 mod pipeline;
 mod plot;
 mod raw;
+mod raw_rawler;
 mod render;
 mod reproducible;
 mod reproject;
