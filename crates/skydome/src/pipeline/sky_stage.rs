@@ -214,6 +214,7 @@ impl Framed {
 /// the merge covered the crop's square alone, which the pipeline does only when the crop is the
 /// first thing to read the pixels. `clipped`: the merge's per-pixel flags (`CLIPPED_HIGH` …) of
 /// the whole photo, when computed.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn run(
     o: &Options,
     br: &Bracket,
