@@ -11,7 +11,9 @@
 //!    and modelled with the nominal projection and field of view ([`LensSource`]);
 //! 3. **response**: a camera profile, or calibration on these frames, sampling inside
 //!    [`Options::calibration_circle`] or else inside the lens circle ([`ResponseSource`]);
-//! 4. **merge** to linear radiance ([`crate::merge`]);
+//! 4. **merge** to linear radiance ([`crate::merge`]) — only the square the crop keeps when a
+//!    plain crop to the dome is the first reader of the merged pixels (the same pixels, a third
+//!    of a 235° fish-eye's memory; the clipped flags stay the whole photo's);
 //! 5. **sky** (only with a lens): crop to the dome, north, the sun (detected, tapped or from the
 //!    ephemeris, cross-checked when two sources exist), Radiance `VIEW=`, the equirectangular map
 //!    ([`SkyOptions`]);
