@@ -30,6 +30,15 @@ pub fn crop_dome(
     lens: &LensProfile,
     fov_out_deg: f64,
 ) -> Result<DomeCrop, FisheyeError> {
+    crop_dome_from(img, (0, 0), lens, fov_out_deg)
+}
+
+/// The square [`crop_dome`] copies, in source pixels: its top-left pixel `(x, y)` (negative
+/// when the crop pokes out of the frame), its side and the crop radius `r(fov_out/2)`.
+pub fn dome_crop_box(
+    lens: &LensProfile,
+    fov_out_deg: f64,
+) -> Result<(i64, i64, usize, f64), FisheyeError> {
     lens.validate()?;
     check_fov(fov_out_deg)?;
     let r = lens.radius_at_deg(0.5 * fov_out_deg)?;
@@ -41,9 +50,22 @@ pub fn crop_dome(
             hint: "the crop would exceed 32768 px a side: check the lens profile",
         });
     }
-    let n = 2 * half as usize;
     let ox = (lens.circle.cx - half).round() as i64;
     let oy = (lens.circle.cy - half).round() as i64;
+    Ok((ox, oy, 2 * half as usize, r))
+}
+
+/// As [`crop_dome`], for `img` a part of the source frame whose pixel (0, 0) is the source's
+/// pixel `origin` (x, y) — e.g. the square of [`dome_crop_box`] alone, all a crop reads. The
+/// result is the same as cropping the whole frame: `lens` and the offsets stay in the whole
+/// frame's pixels.
+pub fn crop_dome_from(
+    img: &HdrImage,
+    origin: (i64, i64),
+    lens: &LensProfile,
+    fov_out_deg: f64,
+) -> Result<DomeCrop, FisheyeError> {
+    let (ox, oy, n, r) = dome_crop_box(lens, fov_out_deg)?;
     let horizon = Circle {
         cx: lens.circle.cx - ox as f64,
         cy: lens.circle.cy - oy as f64,
@@ -52,14 +74,14 @@ pub fn crop_dome(
     let mut out = HdrImage::new(n, n);
     let r2 = r * r;
     for (y, row) in out.data.chunks_exact_mut(3 * n).enumerate() {
-        let sy = oy + y as i64;
+        let sy = oy + y as i64 - origin.1;
         if sy < 0 || sy >= img.height as i64 {
             continue;
         }
         let dy = y as f64 + 0.5 - horizon.cy;
         let src_row = &img.data[3 * sy as usize * img.width..3 * (sy as usize + 1) * img.width];
         for x in 0..n {
-            let sx = ox + x as i64;
+            let sx = ox + x as i64 - origin.0;
             let dx = x as f64 + 0.5 - horizon.cx;
             if sx < 0 || sx >= img.width as i64 || dx * dx + dy * dy > r2 {
                 continue;

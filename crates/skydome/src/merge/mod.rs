@@ -51,6 +51,7 @@
 //! passes over the row, the three look-ups per vote (hat, vote, expected-code weight) scalar.
 
 mod consistency;
+mod flags;
 mod hat;
 mod linear;
 mod refine;
@@ -64,6 +65,7 @@ use consistency::{consistency, Votes};
 use hat::{run_bands, run_releasing, weight, Tables};
 use refine::Refine;
 
+pub use flags::{clipped_flags, ClippedFlags};
 pub use linear::{estimate_linear_noise, merge_linear, LinearMerged, LinearNoise, SAFE_FRACTION};
 pub use uncertainty::{standard_error, summarise as summarise_standard_error};
 

@@ -210,12 +210,17 @@ impl Framed {
 
 /// The sky stage on `radiance` (the merged, uncropped photo): the lens's fall-off divided out,
 /// the absolute scale applied when a measurement is given, and with a lens the dome's geometry
-/// ([`apply`]). `clipped`: the merge's per-pixel flags (`CLIPPED_HIGH` …), when computed.
+/// ([`apply`]). `origin`: the photo's pixel (x, y) at `radiance`'s (0, 0) — not (0, 0) only when
+/// the merge covered the crop's square alone, which the pipeline does only when the crop is the
+/// first thing to read the pixels. `clipped`: the merge's per-pixel flags (`CLIPPED_HIGH` …) of
+/// the whole photo, when computed.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn run(
     o: &Options,
     br: &Bracket,
     lens: Option<(LensProfile, Option<CircleFit>)>,
     mut radiance: HdrImage,
+    origin: (i64, i64),
     clipped: Option<&[u8]>,
     constant: Option<&ConstantScale>,
     progress: &mut Reporter<'_>,
@@ -235,7 +240,7 @@ pub(super) fn run(
         });
     };
     progress.at(Stage::Sky, 0.0)?;
-    let out = apply(o, br, lens, radiance, clipped, photometry)?;
+    let out = apply(o, br, lens, radiance, origin, clipped, photometry)?;
     progress.at(Stage::Sky, 1.0)?;
     Ok(out)
 }
@@ -300,6 +305,7 @@ fn apply(
     br: &Bracket,
     (lens, detected): (LensProfile, Option<CircleFit>),
     radiance: HdrImage,
+    origin: (i64, i64),
     clipped: Option<&[u8]>,
     mut photometry: Option<PhotometryReport>,
 ) -> Result<SkyOutcome, PipelineError> {
@@ -309,7 +315,13 @@ fn apply(
     let full = full_geometry(o, br, &lens)?;
     let mut f = match (s.level.is_some(), s.crop) {
         (true, true) => level_dome(&radiance, &lens, full, s.fov_out_deg)?,
-        _ => frame(radiance, &lens, full, s.crop.then_some(s.fov_out_deg))?,
+        _ => frame(
+            radiance,
+            origin,
+            &lens,
+            full,
+            s.crop.then_some(s.fov_out_deg),
+        )?,
     };
     let horizon = f.geom.horizon_circle();
     let north = s.north_deg.map(|_| f.geom.north_point());
@@ -663,15 +675,18 @@ pub(super) fn full_geometry(
 }
 
 /// Crops to the dome of `crop_fov_deg` when given, moving the geometry's centre with it.
+/// `radiance` starts at the photo's pixel `origin` (the merge's window, when only the crop's
+/// square was merged; else (0, 0)).
 fn frame(
     radiance: HdrImage,
+    origin: (i64, i64),
     lens: &LensProfile,
     full: SkyGeometry,
     crop_fov_deg: Option<f64>,
 ) -> Result<Framed, PipelineError> {
     Ok(match crop_fov_deg {
         Some(fov) => {
-            let c = fisheye::crop_dome(&radiance, lens, fov)?;
+            let c = fisheye::crop_dome_from(&radiance, origin, lens, fov)?;
             Framed {
                 geom: full.with_centre(c.horizon.cx, c.horizon.cy),
                 offset: (c.offset_x as f64, c.offset_y as f64),

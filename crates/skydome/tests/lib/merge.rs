@@ -6,8 +6,8 @@ use crate::common::load_jpegs;
 use skydome::bracket::{Frame, Pixels};
 use skydome::compare::{compare, well_exposed_mask, CompareOptions};
 use skydome::merge::{
-    merge, merge_into, merge_releasing, MergeError, MergeOptions, Weighting, BLACK, CLIPPED_HIGH,
-    CLIPPED_LOW,
+    clipped_flags, merge, merge_into, merge_releasing, MergeError, MergeOptions, Weighting, BLACK,
+    CLIPPED_HIGH, CLIPPED_LOW,
 };
 use skydome::response::{calibrate, CalibrateOptions, Response};
 use skydome::synth::{generate, SynthOptions};
@@ -387,4 +387,47 @@ fn merge_releasing_equals_merge_and_empties_the_frames() {
         merge_releasing(&mut bad, &cal.response, &MergeOptions::default()),
         Err(MergeError::BadExposure { .. })
     ));
+}
+
+/// The flags alone (`clipped_flags`, which the pipeline uses when it merges only the dome's
+/// square) are the merge's own, pixel for pixel and in their counts: 8- and 16-bit frames, one
+/// to three frames, with and without a black level, an odd width and rows of black housing.
+#[test]
+fn clipped_flags_alone_equal_the_merges() {
+    let b = generate(&SynthOptions {
+        width: 97,
+        height: 83,
+        ..Default::default()
+    })
+    .unwrap();
+    let cal = calibrate(&b.frames, b.circle, &CalibrateOptions::default()).unwrap();
+    let f16 = sixteen_bit(&b.frames);
+    let mut seen = (0, 0, 0);
+    for frames in [&b.frames, &f16] {
+        for p in 1..=frames.len() {
+            for black_level in [0u8, 16] {
+                let fs = &frames[..p];
+                let o = MergeOptions {
+                    clipped_mask: true,
+                    black_level,
+                    ..Default::default()
+                };
+                let want = merge(fs, &cal.response, &o).unwrap();
+                let got = clipped_flags(fs, black_level);
+                assert_eq!(
+                    Some(&got.mask),
+                    want.clipped.as_ref(),
+                    "{p} frames, black {black_level}"
+                );
+                assert_eq!(
+                    (got.high, got.low, got.black),
+                    (want.clipped_high, want.clipped_low, want.black_pixels)
+                );
+                seen = (seen.0 + got.high, seen.1 + got.low, seen.2 + got.black);
+            }
+        }
+    }
+    // Every kind of flag occurred, so the comparison covered them.
+    assert!(seen.0 > 0 && seen.1 > 0 && seen.2 > 0, "{seen:?}");
+    assert!(clipped_flags(&[], 0).mask.is_empty());
 }

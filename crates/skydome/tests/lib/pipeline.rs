@@ -438,3 +438,102 @@ fn north_from_the_sun_does_not_depend_on_the_compass() {
         Err(PipelineError::NoEphemeris)
     ));
 }
+
+/// A cropped dome needs only the photos' square around it, and the pipeline merges only that
+/// square when nothing else reads the rest of the photo (on the phone it keeps the merge's
+/// radiance to the dome's size). The dome must be the whole merge's crop bit for bit: the same
+/// runs with the confidence map asked for — which merges the whole photo — give the same dome,
+/// pictures, maps, header and counts. A frame wider than tall puts the square off the corner.
+#[test]
+fn a_dome_merged_in_its_square_is_the_whole_merge_cropped() {
+    let b = skydome::synth::generate(&skydome::synth::SynthOptions {
+        width: 420,
+        height: 360,
+        ..Default::default()
+    })
+    .expect("synth");
+    let circle = b.circle.expect("a fish-eye bracket");
+    let frames =
+        || -> Vec<DecodedFrame> { b.frames.iter().cloned().map(DecodedFrame::from).collect() };
+    for (sun, north) in [
+        (pipeline::SunMode::Auto, Some(30.0)),
+        (pipeline::SunMode::None, None),
+    ] {
+        let part = Options {
+            lens: LensSource::Detect {
+                model: LensKind::Stereographic,
+                fov_deg: 235.0,
+                circle: Some(circle),
+            },
+            sky: SkyOptions {
+                crop: true,
+                sun,
+                north_deg: north,
+                ..SkyOptions::default()
+            },
+            products: pipeline::Products {
+                preview: true,
+                overlay: true,
+                angular: true,
+                equirect: Some(pipeline::EquirectOptions::default()),
+                ..pipeline::Products::default()
+            },
+            ..Options::default()
+        };
+        let mut whole = part.clone();
+        whole.products.confidence = true;
+        let run = |o: &Options| {
+            pipeline::run(
+                Input::new(Frames::Decoded(frames())),
+                o,
+                &mut pipeline::no_progress,
+            )
+            .expect("run")
+        };
+        let (a, w) = (run(&part), run(&whole));
+        assert!(a.radiance.width < 360 && a.radiance.width == a.radiance.height);
+        let bits = |d: &pipeline::Dome| {
+            d.radiance
+                .data
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(
+            (a.radiance.width, a.radiance.height),
+            (w.radiance.width, w.radiance.height)
+        );
+        assert!(bits(&a) == bits(&w), "the dome differs");
+        assert_eq!(a.preview, w.preview);
+        assert_eq!(a.overlay, w.overlay);
+        assert_eq!(a.equirect, w.equirect);
+        assert_eq!(a.angular, w.angular);
+        assert_eq!(a.meta, w.meta);
+        assert_eq!(a.marks, w.marks);
+        let (ra, rw) = (&a.report, &w.report);
+        assert_eq!(
+            (
+                ra.clipped_high_pixels,
+                ra.clipped_low_pixels,
+                ra.black_pixels
+            ),
+            (
+                rw.clipped_high_pixels,
+                rw.clipped_low_pixels,
+                rw.black_pixels
+            )
+        );
+        assert!(
+            ra.clipped_high_pixels + ra.clipped_low_pixels > 0,
+            "the housing and the sun count"
+        );
+        let json = |g| serde_json::to_string(g).expect("json");
+        assert_eq!(json(&ra.geometry), json(&rw.geometry));
+        assert!(
+            ra.warnings.iter().all(|x| rw.warnings.contains(x)),
+            "{:?} {:?}",
+            ra.warnings,
+            rw.warnings
+        );
+    }
+}
