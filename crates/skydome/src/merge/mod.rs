@@ -652,7 +652,6 @@ impl Code for u16 {
 
 /// `2^x` in f32, branch-free (see [`crate::fastmath::exp2`]: relative error below 3·10⁻⁷).
 pub use crate::fastmath::exp2 as fast_exp2;
-use crate::fastmath::log2 as fast_log2;
 
 #[cfg(test)]
 mod tests {
