@@ -194,11 +194,11 @@ pub(super) fn refine_row<T: Code, const N: usize>(
     let (db, dt) = den.as_chunks::<LANES>();
     for ((o, nv), dv) in ob.iter_mut().zip(nb).zip(db) {
         for s in 0..LANES {
-            o[s] = refined(fast_exp2(o[s]), nv[s], dv[s]);
+            o[s] = refined(o[s], nv[s], dv[s]);
         }
     }
     for ((o, &nv), &dv) in ot.iter_mut().zip(nt).zip(dt) {
-        *o = refined(fast_exp2(*o), nv, dv);
+        *o = refined(*o, nv, dv);
     }
 }
 
@@ -288,14 +288,10 @@ fn floor_bin(x: f32, top: f32) -> i32 {
 }
 
 /// The refined value `2^(num / den)` where some frame could vote (`den > 0`) and the hat's
-/// estimate `e0` is positive and finite, else `e0`.
+/// `log2 E₀` is a number, else the hat's `2^log2 E₀`. One `2^x` either way: [`fast_exp2`]
+/// clamps its argument, so its value is positive and finite exactly when that is not NaN.
 #[inline(always)]
-fn refined(e0: f32, num: f32, den: f32) -> f32 {
-    let v = fast_exp2(num / den);
-    let finite = (e0.to_bits() & 0x7fff_ffff) < 0x7f80_0000;
-    if (den > 0.0) & (e0 > 0.0) & finite {
-        v
-    } else {
-        e0
-    }
+fn refined(l0: f32, num: f32, den: f32) -> f32 {
+    let x = num / den;
+    fast_exp2(if (den > 0.0) & !l0.is_nan() { x } else { l0 })
 }
