@@ -325,8 +325,10 @@ pub fn estimate(
                 }
                 // The medians of the differences and of their deviations (the middle values,
                 // as selecting among all the pairs would give).
-                let mut d: Vec<(f64, u32)> =
-                    bin.iter().map(|&(z1, z2, n)| (g[z2] - g[z1] - dl, n)).collect();
+                let mut d: Vec<(f64, u32)> = bin
+                    .iter()
+                    .map(|&(z1, z2, n)| (g[z2] - g[z1] - dl, n))
+                    .collect();
                 let med = kth_counted(&mut d, len / 2);
                 let mut dev: Vec<(f64, u32)> =
                     d.iter().map(|&(v, n)| ((v - med).abs(), n)).collect();

@@ -228,7 +228,8 @@ fn sums<T: Code, const N: usize, const P: usize>(
     let none = [0f32; P];
     for k in 0..m {
         // A row index is in range by construction; a missing row would weigh nothing.
-        let w: [&[f32; P]; 3] = std::array::from_fn(|c| wrows.get(at[k][c] as usize).unwrap_or(&none));
+        let w: [&[f32; P]; 3] =
+            std::array::from_fn(|c| wrows.get(at[k][c] as usize).unwrap_or(&none));
         let (mut nv, mut dv) = ([0f32; 3], [0f32; 3]);
         for j in 0..P {
             let z = srcs[j][k];
