@@ -278,21 +278,21 @@ pub fn estimate(
     }
     let lt: Vec<f64> = frames.iter().map(|f| f.exposure.relative().ln()).collect();
     let (mut total, mut total_bins) = (0usize, 0usize);
-    // The code pairs of adjacent frames, binned by the shorter frame's code, per channel and
-    // frame pair: [c][j][bin], each bin in pixel order. One sweep over the strided pixels reads
-    // each pixel's cache line once for every channel and frame pair.
+    // How often each code pair `(z₁, z₂)` of adjacent frames occurs, per channel and frame
+    // pair: [c][j][z₁ · 256 + z₂]. One sweep over the strided pixels reads each pixel's cache
+    // line once for every channel and frame pair; a bin of the shorter frame's code then holds
+    // thousands of pairs but only a few hundred distinct ones.
     let pairs = frames.len() - 1;
-    let mut binned: [Vec<Bins>; 3] = std::array::from_fn(|_| vec![vec![Vec::new(); BINS]; pairs]);
+    let mut counts: [Vec<Vec<u32>>; 3] = std::array::from_fn(|_| vec![vec![0u32; 1 << 16]; pairs]);
     let mut p = 0;
     while p < np {
         if mask.is_none_or(|m| m[p]) {
-            for (c, per_pair) in binned.iter_mut().enumerate() {
-                for (j, bins) in per_pair.iter_mut().enumerate() {
+            for (c, per_pair) in counts.iter_mut().enumerate() {
+                for (j, pc) in per_pair.iter_mut().enumerate() {
                     let (a, b) = (&frames[j].pixels, &frames[j + 1].pixels);
-                    let (z1, z2) = (code(a, 3 * p + c), code(b, 3 * p + c));
-                    let (u1, u2) = (z1 as usize, z2 as usize);
+                    let (u1, u2) = (code(a, 3 * p + c) as usize, code(b, 3 * p + c) as usize);
                     if (lo..=hi).contains(&u1) && (lo..=hi).contains(&u2) {
-                        bins[(u1 - lo) * BINS / (hi - lo + 1)].push((z1, z2));
+                        pc[u1 << 8 | u2] += 1;
                     }
                 }
             }
@@ -300,35 +300,53 @@ pub fn estimate(
         p += stride;
     }
     let mut all_rows: [Vec<Row>; 3] = Default::default();
-    for ((c, rows), per_pair) in all_rows.iter_mut().enumerate().zip(&binned) {
+    let mut bin: Vec<(usize, usize, u32)> = Vec::new();
+    for ((c, rows), per_pair) in all_rows.iter_mut().enumerate().zip(&counts) {
         let g = response.curve(c);
         let u: Vec<f64> = g.iter().map(|v| (-v).exp()).collect();
         let s: Vec<f64> = (0..LEVELS).map(|z| slope(g, z).powi(2)).collect();
         // Rows of the fit: regressors (Σu, Σu², Σs) and the measured variance, with a weight.
-        for (j, bins) in per_pair.iter().enumerate() {
+        for (j, pc) in per_pair.iter().enumerate() {
             let dl = lt[j + 1] - lt[j];
-            for bin in bins.iter().filter(|b| b.len() >= MIN_PER_BIN) {
-                let mut d: Vec<f64> = bin
+            for k in 0..BINS {
+                // The distinct pairs whose shorter frame's code falls in bin k, with counts.
+                bin.clear();
+                for u1 in (lo..=hi).filter(|u1| (u1 - lo) * BINS / (hi - lo + 1) == k) {
+                    for u2 in lo..=hi {
+                        let n = pc[u1 << 8 | u2];
+                        if n > 0 {
+                            bin.push((u1, u2, n));
+                        }
+                    }
+                }
+                let len: usize = bin.iter().map(|b| b.2 as usize).sum();
+                if len < MIN_PER_BIN {
+                    continue;
+                }
+                // The medians of the differences and of their deviations (the middle values,
+                // as selecting among all the pairs would give).
+                let mut d: Vec<(f64, u32)> = bin
                     .iter()
-                    .map(|&(z1, z2)| g[z2 as usize] - g[z1 as usize] - dl)
+                    .map(|&(z1, z2, n)| (g[z2] - g[z1] - dl, n))
                     .collect();
-                let med = median(&mut d);
-                let mut dev: Vec<f64> = d.iter().map(|v| (v - med).abs()).collect();
-                let mad = median(&mut dev) * 1.4826;
+                let med = kth_counted(&mut d, len / 2);
+                let mut dev: Vec<(f64, u32)> =
+                    d.iter().map(|&(v, n)| ((v - med).abs(), n)).collect();
+                let mad = kth_counted(&mut dev, len / 2) * 1.4826;
                 let var = mad * mad;
                 if !(var.is_finite() && var > 0.0) {
                     continue;
                 }
-                let n = bin.len() as f64;
+                let n = len as f64;
                 let mut r = [0f64; 3];
-                for &(z1, z2) in bin {
-                    let (z1, z2) = (z1 as usize, z2 as usize);
-                    r[0] += u[z1] + u[z2];
-                    r[1] += u[z1] * u[z1] + u[z2] * u[z2];
-                    r[2] += s[z1] + s[z2];
+                for &(z1, z2, m) in &bin {
+                    let m = m as f64;
+                    r[0] += m * (u[z1] + u[z2]);
+                    r[1] += m * (u[z1] * u[z1] + u[z2] * u[z2]);
+                    r[2] += m * (s[z1] + s[z2]);
                 }
                 rows.push((r.map(|v| v / n), var, n.sqrt()));
-                total += bin.len();
+                total += len;
             }
         }
         total_bins += rows.len();
@@ -391,18 +409,19 @@ fn code(p: &Pixels, i: usize) -> u8 {
     }
 }
 
-/// Median by selection; `v` is reordered. 0 for an empty slice.
-pub(crate) fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
+/// The `k`-th smallest value (0-based, in [`f64::total_cmp`]'s order) of the multiset given as
+/// `(value, count)` pairs, which are reordered; 0 when there are not `k + 1` values.
+fn kth_counted(v: &mut [(f64, u32)], k: usize) -> f64 {
+    v.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let mut seen = 0usize;
+    for &(x, n) in v.iter() {
+        seen += n as usize;
+        if seen > k {
+            return x;
+        }
     }
-    let k = v.len() / 2;
-    v.select_nth_unstable_by(k, f64::total_cmp);
-    v[k]
+    0.0
 }
-
-/// Code pairs `(z₁, z₂)` of two adjacent frames, one list per bin of `z₁`.
-type Bins = Vec<Vec<(u8, u8)>>;
 
 /// A row of the noise fit: regressors `(Σu, Σu², Σs)` averaged over a bin, the bin's measured
 /// variance, and the row's weight.

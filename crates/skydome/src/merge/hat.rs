@@ -325,7 +325,18 @@ fn merge_band<T: Code, const N: usize>(
                 }
             }
         }
-        finish_row(orow, &den);
+        match refine {
+            // The noise-aware merge refines the hat's `log2 E₀` while the row is in cache.
+            Some(r) => {
+                if !den.is_empty() {
+                    for (o, &d) in orow.iter_mut().zip(&den) {
+                        *o /= d;
+                    }
+                }
+                refine_row(&rows, r, &mut scratch, orow);
+            }
+            None => finish_row(orow, &den),
+        }
 
         // Clipped pixels: some channel is black or full scale in every frame. Branch-free byte
         // passes over the row that vectorise: `ext` gets each sample's flag (CLIPPED_HIGH when
@@ -350,9 +361,6 @@ fn merge_band<T: Code, const N: usize>(
         high += h;
         low += l;
         blk += b;
-        if let Some(r) = refine {
-            refine_row(&rows, r, &mut scratch, orow);
-        }
 
         if !conf.is_empty() {
             // Integer hat sums (`min(v, max − v)`, exact and vectorisable), then per pixel the

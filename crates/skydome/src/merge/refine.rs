@@ -1,15 +1,15 @@
-//! The noise-model refinement: the second pass of [`Weighting::Noise`](super::Weighting::Noise),
+//! The noise-model refinement: the second estimate of [`Weighting::Noise`](super::Weighting::Noise),
 //! which re-weights every vote by the noise of the code its frame was expected to read.
 
 use super::consistency::LOWER_BOUND_CODE;
-use super::{code_tables, fast_exp2, fast_log2, Code};
+use super::{code_tables, fast_exp2, Code};
 use crate::noise::{self, NoiseModel};
 use crate::response::{Response, LEVELS};
 
-/// Bins per stop of the expected-code weight tables of [`Refine`].
-const EXPECTED_BINS_PER_STOP: f32 = 32.0;
+/// Bins per stop of the hat's estimate `log2 E₀` in the weight rows of [`Refine`].
+const BINS_PER_STOP: f32 = 32.0;
 
-/// The second pass of the noise-aware merge ([`Weighting::Noise`](super::Weighting::Noise)).
+/// The second estimate of the noise-aware merge ([`Weighting::Noise`](super::Weighting::Noise)).
 ///
 /// A vote's variance is that of the code the frame *should* read for the pixel's light, not of
 /// the code it happened to read: weighting by the observed code lets each frame's own noise
@@ -21,21 +21,26 @@ const EXPECTED_BINS_PER_STOP: f32 = 32.0;
 /// [`LOWER_BOUND_CODE`] of clipping, times a factor of the observed code: zero at the black
 /// level and at full scale, fading over the top [`noise::TOP_FADE`] codes. A pixel no frame
 /// can vote for keeps the hat's value (clipped suns, pixels black in every frame).
+///
+/// The weights are looked up, not computed: `log2 E₀` is binned at [`BINS_PER_STOP`] bins a
+/// stop, and each channel's table holds, per bin, one row of every frame's weight at that
+/// bin's expected code (`p` values side by side, one cache line for a few frames). A sample
+/// then costs one bin index (vector arithmetic) and one row, whatever the frame count.
 pub(super) struct Refine<const N: usize> {
     /// Frame-major, then channel, then code: `[log2 E_j, observed-code factor]`.
     votes: Vec<[f32; 2]>,
-    /// `ln Δt_j · log2 e · EXPECTED_BINS_PER_STOP`: frame j's offset in bins.
-    shift: Vec<f32>,
-    /// Per channel: `g · log2 e` of the first bin of its weight table.
-    lo: [f32; 3],
-    /// The three channels' weight tables, one after the other: channel `c`'s, from
-    /// `start[c]`, holds the weight at expected `g · log2 e = lo[c] + k / EXPECTED_BINS_PER_STOP`
-    /// for `k = 0 ..= top[c]`, its last bin zero (expected beyond the usable codes).
-    flat: Vec<f32>,
-    /// Where each channel's weight table starts in `flat`.
+    /// The three channels' weight rows, one channel after the other: channel `c`'s row `b`,
+    /// the `start[c] + b`-th row of `frames` values, holds each frame's weight for `log2 E₀` in bin `b`, that is
+    /// `⌊log2 E₀ · BINS_PER_STOP − off[c]⌋ = b` (clamped to `0 ..= last[c]`).
+    rows: Vec<f32>,
+    /// Frames per row.
+    frames: usize,
+    /// Per channel: the bin offset (see `rows`).
+    off: [f32; 3],
+    /// Per channel: the last bin, as `f32` for clamping.
+    last: [f32; 3],
+    /// Per channel: its first row's index in `rows` (in rows).
     start: [i32; 3],
-    /// Each channel's last bin (its table's length − 1), as `f32` for clamping bins.
-    top: [f32; 3],
 }
 
 impl<const N: usize> Refine<N> {
@@ -47,6 +52,7 @@ impl<const N: usize> Refine<N> {
         g: impl Fn(usize, usize) -> f64,
     ) -> Self {
         let l2 = std::f64::consts::LOG2_E;
+        let bps = BINS_PER_STOP as f64;
         let scale = 255.0 / (N - 1) as f64;
         let votes = code_tables::<N>(lt, &g, |_, _, v, vote| {
             let z = v as f64 * scale;
@@ -54,83 +60,91 @@ impl<const N: usize> Refine<N> {
             let fade = ((255.0 - z) / noise::TOP_FADE).clamp(0.0, 1.0);
             [vote, if usable { fade as f32 } else { 0.0 }]
         });
-        let mut lo = [0f32; 3];
-        let weights = [0, 1, 2].map(|c| {
+        let p = lt.len().max(1);
+        // Frame j's exposure offset in bins: expected `log2` code value = log2 E₀ + shift/bps.
+        let shift: Vec<f64> = lt.iter().map(|l| l * l2 * bps).collect();
+        let smax = shift.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let smin = shift.iter().copied().fold(f64::INFINITY, f64::min);
+        let (mut off, mut last, mut start) = ([0f32; 3], [0f32; 3], [0i32; 3]);
+        let mut rows = Vec::new();
+        for c in 0..3 {
             let curve = response.curve(c);
             let y: Vec<f64> = curve.iter().map(|v| v * l2).collect();
             let var: Vec<f64> = (0..LEVELS)
                 .map(|z| model.log_variance(response, c, z))
                 .collect();
-            let first = black as usize + 1;
+            let first = (black as usize + 1).min(LOWER_BOUND_CODE - 1);
             let top = LOWER_BOUND_CODE;
-            lo[c] = y[first] as f32;
-            let bins = (((y[top] - y[first]) * EXPECTED_BINS_PER_STOP as f64).ceil() as usize)
-                .clamp(1, 1 << 16);
-            let mut w: Vec<f32> = (0..bins)
-                .map(|k| {
-                    let target = y[first] + k as f64 / EXPECTED_BINS_PER_STOP as f64;
-                    // The continuous code where the curve reaches `target` (nondecreasing).
-                    let i = first + y[first..=top].partition_point(|&v| v < target);
-                    let i = i.clamp(first + 1, top);
-                    let (a, b) = (y[i - 1], y[i]);
-                    let f = if b > a {
-                        ((target - a) / (b - a)).clamp(0.0, 1.0)
-                    } else {
-                        1.0
-                    };
-                    let v = var[i - 1] * (1.0 - f) + var[i] * f;
-                    if v.is_finite() && v > 0.0 {
-                        (1.0 / v) as f32
-                    } else {
-                        0.0
-                    }
-                })
-                .collect();
-            w.push(0.0);
-            w
-        });
-        let mut flat = Vec::with_capacity(weights.iter().map(Vec::len).sum());
-        let (mut start, mut top) = ([0i32; 3], [0f32; 3]);
-        for (c, w) in weights.iter().enumerate() {
-            // At most 2^16 + 1 bins per channel: offsets and last bins are exact in i32 and f32.
-            start[c] = flat.len() as i32;
-            top[c] = (w.len() - 1) as f32;
-            flat.extend_from_slice(w);
+            // The inverse variance at the code where the curve reaches `target` (log2 units):
+            // the first usable code's below it, zero beyond the usable codes.
+            let weight = |target: f64| -> f32 {
+                if target.is_nan() || target > y[top] {
+                    return 0.0;
+                }
+                let target = target.max(y[first]);
+                let i = first + y[first..=top].partition_point(|&v| v < target);
+                let i = i.clamp(first + 1, top);
+                let (a, b) = (y[i - 1], y[i]);
+                let f = if b > a {
+                    ((target - a) / (b - a)).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                };
+                let v = var[i - 1] * (1.0 - f) + var[i] * f;
+                if v.is_finite() && v > 0.0 {
+                    (1.0 / v) as f32
+                } else {
+                    0.0
+                }
+            };
+            // Bin 0 has every frame expected at or below the first usable code, the last bin
+            // every frame beyond the usable codes: bins outside change nothing.
+            let lo = y[first] as f32;
+            let span = (y[top] - y[first]) * bps;
+            let kmin = (-smax).floor() - 1.0;
+            let bins = ((span - smin - kmin).ceil() + 2.0).clamp(2.0, 65_536.0) as usize;
+            off[c] = lo * BINS_PER_STOP + kmin as f32;
+            last[c] = (bins - 1) as f32;
+            start[c] = (rows.len() / p) as i32;
+            for b in 0..bins {
+                for s in &shift {
+                    rows.push(weight(lo as f64 + (b as f64 + kmin + s) / bps));
+                }
+            }
         }
         Self {
             votes,
-            flat,
+            rows,
+            frames: p,
+            off,
+            last,
             start,
-            top,
-            shift: lt
-                .iter()
-                .map(|l| (l * l2) as f32 * EXPECTED_BINS_PER_STOP)
-                .collect(),
-            lo,
         }
     }
 }
 
+/// Samples per block of the vector passes: eight pixels, so each lane's channel is fixed.
+const LANES: usize = 24;
+
 /// Row buffers of [`refine_row`], allocated once per band of rows.
 #[derive(Default)]
 pub(super) struct Scratch {
-    /// Per frame, then sample: the index of the vote's weight in [`Refine::flat`].
-    at: Vec<i32>,
+    /// Per sample: the index of its weight row in [`Refine::rows`], in rows.
+    at: Vec<u32>,
     /// Per sample: `Σ w · log2 E_j`.
     num: Vec<f32>,
     /// Per sample: `Σ w`.
     den: Vec<f32>,
 }
 
-/// Refines one row of the hat's estimate in `out` (`3 · width` samples, starting at a pixel's
-/// red sample), given that row of every frame in `rows`. The merge calls it on each row right
-/// after the hat pass, while the row's codes are still in cache.
+/// Refines one row of the hat's estimate: `out` (`3 · width` samples, starting at a pixel's red
+/// sample) holds the hat's `log2 E₀` on entry and the radiance on return; `rows` holds that row
+/// of every frame. The merge calls it on each row right after the hat pass, while the row's
+/// codes are still in cache.
 ///
-/// Three passes over the row: the weight-table index of every vote (vector arithmetic), the
-/// look-ups and sums (scalar, one pixel's three channels at a time with the sums in
-/// registers), and the final `2^x` (vector arithmetic). Keeping the scalar look-ups apart
-/// from the vector passes, a row apart in time, avoids the store-to-load stalls of mixing
-/// scalar stores and vector loads on the same few values.
+/// Three passes over the row: each sample's weight row (vector arithmetic), the look-ups and
+/// sums (scalar, one pixel's three channels at a time with the sums in registers, the frame
+/// loop unrolled for up to nine frames), and the final `2^x` (vector arithmetic).
 pub(super) fn refine_row<T: Code, const N: usize>(
     rows: &[&[T]],
     r: &Refine<N>,
@@ -138,59 +152,41 @@ pub(super) fn refine_row<T: Code, const N: usize>(
     out: &mut [f32],
 ) {
     let n = out.len();
-    let p = rows.len();
-    let (tables, _) = r.votes.as_chunks::<N>();
-    let (frames, _) = tables.as_chunks::<3>();
-    let frames = &frames[..p];
-    scratch.at.resize(p * n, 0);
+    debug_assert_eq!(rows.len(), r.frames);
+    scratch.at.resize(n, 0);
     scratch.num.resize(n, 0.0);
     scratch.den.resize(n, 0.0);
-    // 1. Per frame, the index of each vote's weight: the expected bin, clamped to its channel's
-    //    table, plus where that table starts. Eight pixels at a time (a multiple of three
-    //    samples, so each lane's channel is fixed), so it vectorises.
-    const LANES: usize = 24;
-    let lo: [f32; LANES] = std::array::from_fn(|s| r.lo[s % 3]);
-    let top: [f32; LANES] = std::array::from_fn(|s| r.top[s % 3]);
+    // 1. Each sample's weight row: its bin of `log2 E₀`, clamped, plus where its channel's
+    //    rows start.
+    let off: [f32; LANES] = std::array::from_fn(|s| r.off[s % 3]);
+    let last: [f32; LANES] = std::array::from_fn(|s| r.last[s % 3]);
     let start: [i32; LANES] = std::array::from_fn(|s| r.start[s % 3]);
-    let (blocks, tail) = out.as_chunks::<LANES>();
-    let nb = blocks.len() * LANES;
-    for (b, o) in blocks.iter().enumerate() {
-        let mut base = [0f32; LANES];
+    let at = &mut scratch.at[..n];
+    let (ab, atail) = at.as_chunks_mut::<LANES>();
+    let (ob, otail) = out.as_chunks::<LANES>();
+    for (a, o) in ab.iter_mut().zip(ob) {
         for s in 0..LANES {
-            base[s] = (fast_log2(o[s]) - lo[s]) * EXPECTED_BINS_PER_STOP;
-        }
-        for (at, &shift) in scratch.at.chunks_exact_mut(n).zip(&r.shift) {
-            let at: &mut [i32; LANES] = match (&mut at[b * LANES..(b + 1) * LANES]).try_into() {
-                Ok(v) => v,
-                Err(_) => unreachable!("a block of LANES samples"),
-            };
-            for s in 0..LANES {
-                at[s] = start[s] + floor_bin(base[s] + shift, top[s]);
-            }
+            a[s] = (start[s] + floor_bin(o[s] * BINS_PER_STOP - off[s], last[s])) as u32;
         }
     }
-    for (k, o) in tail.iter().enumerate() {
+    let nb = ob.len() * LANES;
+    for (k, (a, o)) in atail.iter_mut().zip(otail).enumerate() {
         let c = (nb + k) % 3;
-        let base = (fast_log2(*o) - r.lo[c]) * EXPECTED_BINS_PER_STOP;
-        for (at, &shift) in scratch.at.chunks_exact_mut(n).zip(&r.shift) {
-            at[nb + k] = r.start[c] + floor_bin(base + shift, r.top[c]);
-        }
+        *a = (r.start[c] + floor_bin(*o * BINS_PER_STOP - r.off[c], r.last[c])) as u32;
     }
     // 2. The weighted sums.
-    let at = &scratch.at[..p * n];
     let (num, den) = (&mut scratch.num[..n], &mut scratch.den[..n]);
-    for i in (0..n).step_by(3) {
-        let (mut nv, mut dv) = ([0f32; 3], [0f32; 3]);
-        for (j, (src, tab)) in rows.iter().zip(frames).enumerate() {
-            for c in 0..3 {
-                let [vote, f] = tab[c][src[i + c].index()];
-                let w = f * r.flat[at[j * n + i + c] as usize];
-                nv[c] += w * vote;
-                dv[c] += w;
-            }
-        }
-        num[i..i + 3].copy_from_slice(&nv);
-        den[i..i + 3].copy_from_slice(&dv);
+    match rows.len() {
+        1 => sums::<T, N, 1>(rows, r, at, num, den),
+        2 => sums::<T, N, 2>(rows, r, at, num, den),
+        3 => sums::<T, N, 3>(rows, r, at, num, den),
+        4 => sums::<T, N, 4>(rows, r, at, num, den),
+        5 => sums::<T, N, 5>(rows, r, at, num, den),
+        6 => sums::<T, N, 6>(rows, r, at, num, den),
+        7 => sums::<T, N, 7>(rows, r, at, num, den),
+        8 => sums::<T, N, 8>(rows, r, at, num, den),
+        9 => sums::<T, N, 9>(rows, r, at, num, den),
+        _ => sums_any(rows, r, at, num, den),
     }
     // 3. The refined value where some frame could vote, else the hat's.
     let (ob, ot) = out.as_chunks_mut::<LANES>();
@@ -203,6 +199,78 @@ pub(super) fn refine_row<T: Code, const N: usize>(
     }
     for ((o, &nv), &dv) in ot.iter_mut().zip(nt).zip(dt) {
         *o = refined(*o, nv, dv);
+    }
+}
+
+/// The sums of [`refine_row`] for `P` frames: per pixel, every frame's three votes, each
+/// weighted by its observed-code factor and its entry in the sample's weight row.
+#[inline(always)]
+fn sums<T: Code, const N: usize, const P: usize>(
+    rows: &[&[T]],
+    r: &Refine<N>,
+    at: &[u32],
+    num: &mut [f32],
+    den: &mut [f32],
+) {
+    let (tables, _) = r.votes.as_chunks::<N>();
+    let (frames, _) = tables.as_chunks::<3>();
+    let frames: &[[[[f32; 2]; N]; 3]; P] = match frames[..P].try_into() {
+        Ok(f) => f,
+        Err(_) => unreachable!("P frames"),
+    };
+    // Whole pixels, every slice cut to the same length so the loop needs no bounds checks.
+    let m = num.len() / 3;
+    let srcs: [&[[T; 3]]; P] = std::array::from_fn(|j| &rows[j].as_chunks::<3>().0[..m]);
+    let at = &at.as_chunks::<3>().0[..m];
+    let num = &mut num.as_chunks_mut::<3>().0[..m];
+    let den = &mut den.as_chunks_mut::<3>().0[..m];
+    let (wrows, _) = r.rows.as_chunks::<P>();
+    let none = [0f32; P];
+    for k in 0..m {
+        // A row index is in range by construction; a missing row would weigh nothing.
+        let w: [&[f32; P]; 3] =
+            std::array::from_fn(|c| wrows.get(at[k][c] as usize).unwrap_or(&none));
+        let (mut nv, mut dv) = ([0f32; 3], [0f32; 3]);
+        for j in 0..P {
+            let z = srcs[j][k];
+            for c in 0..3 {
+                let [vote, f] = frames[j][c][z[c].index()];
+                let wt = f * w[c][j];
+                nv[c] += wt * vote;
+                dv[c] += wt;
+            }
+        }
+        num[k] = nv;
+        den[k] = dv;
+    }
+}
+
+/// [`sums`] for any number of frames.
+fn sums_any<T: Code, const N: usize>(
+    rows: &[&[T]],
+    r: &Refine<N>,
+    at: &[u32],
+    num: &mut [f32],
+    den: &mut [f32],
+) {
+    let p = rows.len();
+    let (tables, _) = r.votes.as_chunks::<N>();
+    let (frames, _) = tables.as_chunks::<3>();
+    for (i, (nv, dv)) in num.iter_mut().zip(den.iter_mut()).enumerate() {
+        let c = i % 3;
+        let a = at[i] as usize * p;
+        let Some(w) = r.rows.get(a..a + p) else {
+            (*nv, *dv) = (0.0, 0.0);
+            continue;
+        };
+        let (mut sn, mut sd) = (0f32, 0f32);
+        for ((src, tab), &wj) in rows.iter().zip(frames).zip(w) {
+            let [vote, f] = tab[c][src[i].index()];
+            let wt = f * wj;
+            sn += wt * vote;
+            sd += wt;
+        }
+        (*nv, *dv) = (sn, sd);
     }
 }
 
@@ -221,14 +289,10 @@ fn floor_bin(x: f32, top: f32) -> i32 {
 }
 
 /// The refined value `2^(num / den)` where some frame could vote (`den > 0`) and the hat's
-/// estimate `e0` is positive and finite, else `e0`.
+/// `log2 E₀` is a number, else the hat's `2^log2 E₀`. One `2^x` either way: [`fast_exp2`]
+/// clamps its argument, so its value is positive and finite exactly when that is not NaN.
 #[inline(always)]
-fn refined(e0: f32, num: f32, den: f32) -> f32 {
-    let v = fast_exp2(num / den);
-    let finite = (e0.to_bits() & 0x7fff_ffff) < 0x7f80_0000;
-    if (den > 0.0) & (e0 > 0.0) & finite {
-        v
-    } else {
-        e0
-    }
+fn refined(l0: f32, num: f32, den: f32) -> f32 {
+    let x = num / den;
+    fast_exp2(if (den > 0.0) & !l0.is_nan() { x } else { l0 })
 }
