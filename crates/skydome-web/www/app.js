@@ -474,6 +474,10 @@ function showFacts(result) {
       facts.push(['Cross-check', `the sun in the picture is ${fmt(g.sun_cross_check.angle_deg, 1)}° from where the date, time and place put it; a compass off by ${fmt(g.sun_cross_check.compass_error_deg, 1)}° would explain that`]);
     } else if (settings.location && !place) {
       facts.push(['Cross-check', 'no location was given, so the sun found in the picture could not be checked against the date, time and place']);
+    } else if (settings.location && !g.sun_ephemeris) {
+      facts.push(['Cross-check', 'the photos carry no date and time, so the sun found in the picture could not be checked against where the date, time and place put it']);
+    } else if (settings.location && !g.sun) {
+      facts.push(['Cross-check', 'no sun was found in the picture to check against where the date, time and place put it']);
     }
   }
   const core = result.core || { threads: 1 };
