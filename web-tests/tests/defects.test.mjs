@@ -252,7 +252,7 @@ test('lens hint: the default lens setting misses the sun of a real 180° sky ima
 });
 
 // 6. Landscape: the viewfinder fits and the horizon circle can be seen on any sky.
-test('landscape: the viewfinder and the horizon circle fit 844 × 390, the horizon line is ≥ 2 px wide with ≥ 3:1 contrast along its length', async () => {
+test('landscape: the viewfinder and the horizon circle fit 844 × 390, the horizon line is ≥ 2.5 px wide with ≥ 3:1 contrast along its length', async () => {
   const dir = tempDir('overlay');
   const lensFile = path.join(dir, 'lens.json');
   cli(['lens', 'fit', '--circle', '200,200,192', '--fov', '235', '--model', 'stereographic', '-o', lensFile, '--quiet']);
@@ -317,7 +317,7 @@ test('landscape: the viewfinder and the horizon circle fit 844 × 390, the horiz
     const thinnest = Math.min(...m.samples.map((s) => s.widthCss));
     const worst = Math.min(...best.map((_, i) => Math.max(...[-3, -2, -1, 0, 1, 2, 3].map((k) => best[(i + k + best.length) % best.length]))));
     console.log(`horizon line: ${m.w}×${m.h} canvas at ${m.scale.toFixed(3)} CSS px per pixel, thinnest ${thinnest.toFixed(2)} CSS px, worst contrast ${worst.toFixed(2)}:1`);
-    assert.ok(thinnest >= 2, `the horizon line is ${thinnest.toFixed(2)} CSS px wide somewhere (≥ 2 wanted)`);
+    assert.ok(thinnest >= 2.5, `the horizon line is ${thinnest.toFixed(2)} CSS px wide somewhere (≥ 2.5 wanted)`);
     assert.ok(worst >= 3, `the horizon line's contrast with the picture falls to ${worst.toFixed(2)}:1 (≥ 3:1 wanted)`);
   } finally { await p.close(); }
 });
@@ -355,7 +355,7 @@ for (const [name, viewport] of VIEWPORTS) {
           g.font = `${cs.fontWeight} ${cs.fontSize} ${cs.fontFamily}`;
           const text = Math.max(...[...s.options].map((o) => g.measureText(o.text).width));
           const room = s.clientWidth - parseFloat(cs.paddingLeft) - parseFloat(cs.paddingRight) - 20; // the arrow
-          if (text > room) out.push(`${s.name}: its longest choice is ${text.toFixed(0)} px in ${room.toFixed(0)} px`);
+          if (text > room + 1) out.push(`${s.name}: its longest choice is ${text.toFixed(0)} px in ${room.toFixed(0)} px`);
         }
         return out;
       });
