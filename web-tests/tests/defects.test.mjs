@@ -133,7 +133,6 @@ test('pick photos: a bracket from another camera is stored under its EXIF camera
     cli(['calibrate', ...files, '-o', prof, '--quiet']);
     const { make, model } = JSON.parse(readFileSync(prof, 'utf8'));
     assert.ok(make || model, 'the CLI read a camera name from the EXIF');
-    await p.page.click('#back');
     since = await p.page.evaluate(() => Date.now());
     await p.page.setInputFiles('#gallery', files);
     assert.equal(await resultOrError(p.page, since), null);
