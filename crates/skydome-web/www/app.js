@@ -1120,8 +1120,6 @@ function wire() {
   });
 }
 
-// The overlay's line widths follow the viewfinder's size (a turn of the phone changes it).
-window.addEventListener('resize', () => drawOverlay());
 startWorker();
 // Which core the worker loaded ({build, threads, reason}), for the browser tests.
 ask('core').then((c) => { document.body.dataset.core = c.build; document.body.dataset.threads = String(c.threads); }).catch(() => {});
