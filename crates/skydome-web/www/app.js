@@ -70,7 +70,8 @@ function show(name) {
   // The camera runs only on its own screen: during a merge its frame buffers would share the
   // phone's memory with the core.
   if (name === 'camera' && !camera.running() && cameraWanted) startCamera();
-  if (name === 'camera') updateMarks();
+  // The overlay's line widths depend on the viewfinder's size on screen (none while hidden).
+  if (name === 'camera') { drawOverlay(); updateMarks(); }
   if (name === 'work' && camera.running()) camera.stop();
 }
 
@@ -474,6 +475,10 @@ function showFacts(result) {
       facts.push(['Cross-check', `the sun in the picture is ${fmt(g.sun_cross_check.angle_deg, 1)}° from where the date, time and place put it; a compass off by ${fmt(g.sun_cross_check.compass_error_deg, 1)}° would explain that`]);
     } else if (settings.location && !place) {
       facts.push(['Cross-check', 'no location was given, so the sun found in the picture could not be checked against the date, time and place']);
+    } else if (settings.location && !g.sun_ephemeris) {
+      facts.push(['Cross-check', 'the photos carry no date and time, so the sun found in the picture could not be checked against where the date, time and place put it']);
+    } else if (settings.location && !g.sun) {
+      facts.push(['Cross-check', 'no sun was found in the picture to check against where the date, time and place put it']);
     }
   }
   const core = result.core || { threads: 1 };
@@ -707,7 +712,11 @@ function drawOverlay() {
   // The point drawn, for the browser tests.
   if (n) document.body.dataset.north = `${n.x},${n.y}`; else delete document.body.dataset.north;
   if (!marks) return;
-  const lw = Math.max(3, w / 200);
+  // Line widths in the picture's pixels, at least 1.5 CSS px however small the picture is shown
+  // (a 1280 × 960 camera picture in a landscape viewfinder is drawn at ~0.18 CSS px per pixel).
+  const rect = canvas.getBoundingClientRect();
+  const scale = Math.min(rect.width / w, rect.height / h);
+  const lw = Math.max(3, w / 200, scale > 0 ? 1.5 / scale : 0);
   g.lineWidth = lw;
   g.strokeStyle = '#ffd400';
   g.beginPath(); g.arc(marks.circle.cx, marks.circle.cy, marks.circle.r, 0, 2 * Math.PI); g.stroke();
@@ -1058,7 +1067,14 @@ function wire() {
   writeForm(settings);
   $('settings-form').addEventListener('change', () => { saveSettings(); resetLens(); });
   $('to-settings').onclick = () => { show('settings'); renderProfiles().catch(showError); };
-  $('settings-done').onclick = () => { saveSettings(); show('camera'); };
+  // Leaving Settings: a notice about it (a profile imported) has been read; on the camera screen
+  // it would push the viewfinder below the fold in landscape.
+  const closeSettings = () => {
+    saveSettings();
+    if ($('message').className === 'info') $('message').hidden = true;
+    show('camera');
+  };
+  $('settings-done').onclick = closeSettings;
   $('gallery').addEventListener('change', fromGallery);
   $('times-form').addEventListener('submit', submitTimes);
   $('times-cancel').onclick = () => { $('times-form').hidden = true; timesFiles = null; };
@@ -1070,7 +1086,7 @@ function wire() {
     $('meter-spot-at').textContent = markingSpot ? 'Now tap the place the meter pointed at.' : $('meter-spot-at').textContent;
   };
   $('meter-apply').onclick = applyReadings;
-  $('settings-done-top').onclick = () => { saveSettings(); show('camera'); };
+  $('settings-done-top').onclick = closeSettings;
   $('capture').onclick = capture;
   $('cancel').onclick = () => { cancelWork(); show('camera'); showInfo('Cancelled: nothing was saved.'); };
   $('back').onclick = () => {
