@@ -114,8 +114,25 @@ pub fn detect_circle_luma(
         best = Some(fit);
     }
     let fit = best.ok_or(FisheyeError::NoCircle { points: 0 })?;
+    if !plausible(&fit.circle, width, height) {
+        return Err(FisheyeError::NoCircle { points: fit.points });
+    }
     doubt_housing(&img, housing, &fit.circle)?;
     Ok(fit)
+}
+
+/// A lens's picture circle has its centre on the image and a radius no larger than the image's
+/// diagonal (a circle cut by the frame is still centred on it). Boundary points that lie
+/// nearly on a line (a test pattern's straight edge) fit a circle millions of pixels wide
+/// centred far off the image; the housing check cannot judge it (no grid point of the image
+/// falls inside 0.9 of such a circle), so it is refused here.
+fn plausible(c: &Circle, width: usize, height: usize) -> bool {
+    let (w, h) = (width as f64, height as f64);
+    c.r.is_finite()
+        && c.r > 0.0
+        && c.r <= w.hypot(h)
+        && (0.0..=w).contains(&c.cx)
+        && (0.0..=h).contains(&c.cy)
 }
 
 /// The corners' level may be at most this fraction of the median level inside the circle.
@@ -485,4 +502,35 @@ fn robust_circle_fit(pts: &[(f64, f64)]) -> Result<CircleFit, FisheyeError> {
 fn rms_distance(c: &Circle, pts: &[(f64, f64)]) -> f64 {
     let s: f64 = pts.iter().map(|&p| distance(c, p).powi(2)).sum();
     (s / pts.len().max(1) as f64).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_circle_off_the_image_or_wider_than_its_diagonal_is_not_a_lens_circle() {
+        let c = |cx, cy, r| Circle { cx, cy, r };
+        // A real picture circle, one cut by the frame, and the fake camera's near-line fit
+        // (radius 74 million pixels) on a 640 × 480 frame.
+        assert!(plausible(&c(320.0, 240.0, 230.0), 640, 480));
+        assert!(plausible(&c(320.0, 240.0, 390.0), 640, 480));
+        assert!(!plausible(&c(320.0, 240.0, 74_250_743.0), 640, 480));
+        assert!(!plausible(&c(-5.0e7, 240.0, 5.0e7), 640, 480));
+        assert!(!plausible(&c(320.0, 240.0, f64::NAN), 640, 480));
+        assert!(!plausible(&c(320.0, 240.0, 0.0), 640, 480));
+    }
+
+    #[test]
+    fn a_straight_bright_edge_is_no_lens_circle() {
+        // The left half lit, the right half dark: boundary points on a line.
+        let (w, h) = (640usize, 480usize);
+        let luma: Vec<u8> = (0..w * h)
+            .map(|i| if i % w < w / 2 { 200 } else { 0 })
+            .collect();
+        match detect_circle_luma(&luma, w, h) {
+            Err(FisheyeError::NoCircle { .. } | FisheyeError::NoHousing { .. }) => {}
+            other => panic!("{other:?}"),
+        }
+    }
 }
