@@ -1,7 +1,7 @@
 //! Vignetting: a fall-off fitted from (angle, relative value) measurements is divided out by the
 //! merge, so a uniform sky comes out flat.
 
-use skydome::bracket::{CaptureInfo, DecodedFrame, Pixels};
+use skydome::bracket::{DecodedFrame, Pixels};
 use skydome::camera::CameraProfile;
 use skydome::fisheye::{LensKind, LensProfile, Vignetting};
 use skydome::image::Circle;
@@ -46,18 +46,8 @@ fn frames(lens: &LensProfile, times: &[f64]) -> Vec<DecodedFrame> {
                 }
             }
             DecodedFrame {
-                name: format!("f{i}"),
-                width: w,
-                height: h,
-                pixels: Pixels::U8(px),
                 exif_time_s: Some(t),
-                iso: None,
-                f_number: None,
-                info: CaptureInfo {
-                    orientation: 1,
-                    ..CaptureInfo::default()
-                },
-                non_srgb_icc: None,
+                ..DecodedFrame::new(&format!("f{i}"), w, h, Pixels::U8(px))
             }
         })
         .collect()
