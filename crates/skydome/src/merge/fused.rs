@@ -144,6 +144,10 @@ fn hat_weight(j: usize, p: usize, z: u8) -> f32 {
 
 /// Whether this CPU runs the kernel.
 fn available() -> bool {
+    #[cfg(test)]
+    if tests::SCALAR.with(|s| s.get()) {
+        return false;
+    }
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")
@@ -404,5 +408,106 @@ mod avx2 {
         let p = _mm256_add_ps(c[0], _mm256_mul_ps(f, p));
         let scale = _mm256_slli_epi32::<23>(_mm256_add_epi32(k, _mm256_set1_epi32(127)));
         _mm256_mul_ps(p, _mm256_castsi256_ps(scale))
+    }
+}
+
+#[cfg(test)]
+pub(super) mod tests {
+    use crate::bracket::{Exposure, Frame, Pixels};
+    use crate::merge::{merge, MergeOptions, Weighting};
+    use crate::noise::NoiseModel;
+    use crate::response::{Response, LEVELS};
+    use std::cell::Cell;
+
+    thread_local! {
+        /// Set, this thread's merges take the scalar path.
+        pub(in crate::merge) static SCALAR: Cell<bool> = const { Cell::new(false) };
+    }
+
+    /// Random 8-bit frames, a third of the codes at the black level, the top fade or a bound.
+    fn frames(p: usize, w: usize, h: usize, seed: u64) -> Vec<Frame> {
+        let mut state = seed | 1;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        (0..p)
+            .map(|j| {
+                let pixels = (0..w * h * 3)
+                    .map(|_| match next() % 9 {
+                        0 => 0,
+                        1 => 255,
+                        2 => 240 + (next() % 16) as u8,
+                        3 => (next() % 16) as u8,
+                        _ => next() as u8,
+                    })
+                    .collect();
+                Frame {
+                    name: format!("f{j}"),
+                    width: w,
+                    height: h,
+                    pixels: Pixels::U8(pixels),
+                    exposure: Exposure {
+                        time_s: 2f64.powf(1.5 * j as f64) / 100.0,
+                        iso: None,
+                        f_number: None,
+                    },
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_vector_kernel_gives_the_scalar_paths_bits() {
+        if !super::available() {
+            println!("skipped: this CPU has no AVX2, so only the scalar path exists");
+            return;
+        }
+        let r = Response::from_curves([0.9, 1.0, 1.1].map(|a| {
+            (0..LEVELS)
+                .map(|z| a * ((z as f64 + 0.5) / 128.5).ln())
+                .collect::<Vec<_>>()
+        }))
+        .unwrap();
+        let model = NoiseModel::default();
+        for p in 1..=super::MAX_FRAMES + 1 {
+            for black in [0u8, 9] {
+                // 37 pixels a row: four steps of eight pixels and a scalar tail of five.
+                let fs = frames(p, 37, 11, 7 + p as u64 + black as u64);
+                let lt: Vec<f64> = fs.iter().map(|f| f.exposure.relative().ln()).collect();
+                let g = |c: usize, v: usize| r.curve(c)[v];
+                let refine = super::Refine::<256>::new(&lt, &r, &model, black, g);
+                let hat = super::super::hat::Tables::<256>::new(
+                    &lt,
+                    |j, _c, z| super::super::hat::weight(z, j, p, Weighting::Hat),
+                    g,
+                );
+                let fused = super::Fused::new(&refine, |j, c, z| hat.entry(j, c, z), black);
+                assert_eq!(
+                    fused.is_some(),
+                    p <= super::MAX_FRAMES,
+                    "{p} frames, black {black}: the kernel should run up to {} frames",
+                    super::MAX_FRAMES
+                );
+                let o = MergeOptions {
+                    weighting: Weighting::Noise,
+                    noise: Some(model),
+                    black_level: black,
+                    ..Default::default()
+                };
+                let vector = merge(&fs, &r, &o).unwrap().radiance.data;
+                SCALAR.with(|s| s.set(true));
+                let scalar = merge(&fs, &r, &o).unwrap().radiance.data;
+                SCALAR.with(|s| s.set(false));
+                let differ = vector
+                    .iter()
+                    .zip(&scalar)
+                    .filter(|(a, b)| a.to_bits() != b.to_bits())
+                    .count();
+                assert_eq!(differ, 0, "{p} frames, black {black}: {differ} samples differ");
+            }
+        }
     }
 }
