@@ -16,6 +16,9 @@
 //! path's tables for every frame, channel and code and declines (the scalar path runs) on any
 //! difference — a weighting this kernel does not know can never change a result.
 
+// Beyond x86-64 `Fused::new` always declines, and the tables it would fill are never read.
+#![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+
 use super::refine::Refine;
 
 /// Frames the kernel is unrolled for; more take the scalar path.
@@ -240,15 +243,15 @@ mod avx2 {
                 let q = (s / 8) % 3;
                 let vote = &mut vs[v];
                 let (mut num, mut den, mut gn, mut gd) = (zero, zero, zero, zero);
-                for j in 0..P {
+                for (j, vj) in vote.iter_mut().enumerate() {
                     let z = code_at(j, s);
                     // SAFETY: frame j's votes are `3 · 256` values from `votes + 768 j`, and
                     // the index is a channel's 256 codes (`chan` ≤ 512) plus a code (≤ 255).
-                    vote[j] = unsafe {
+                    *vj = unsafe {
                         _mm256_i32gather_ps::<4>(votes.add(j * 768), _mm256_add_epi32(z, chan[q]))
                     };
                     let w = hat_weight::<P>(j, z);
-                    let wv = _mm256_mul_ps(w, vote[j]);
+                    let wv = _mm256_mul_ps(w, *vj);
                     // The hat's sums, three frames to a group as the scalar path adds them.
                     if j % 3 == 0 {
                         (gd, gn) = (w, wv);
@@ -316,9 +319,7 @@ mod avx2 {
                             _mm256_castps_pd(t3),
                         )),
                     ];
-                    for j in 0..P {
-                        wrow[j] = cols[j];
-                    }
+                    wrow.copy_from_slice(&cols[..P]);
                 } else {
                     for (j, w) in wrow.iter_mut().enumerate() {
                         // SAFETY: 0 ≤ base ≤ rows.len() − 3 − P (clamped above) and j < P.
@@ -506,7 +507,10 @@ pub(super) mod tests {
                     .zip(&scalar)
                     .filter(|(a, b)| a.to_bits() != b.to_bits())
                     .count();
-                assert_eq!(differ, 0, "{p} frames, black {black}: {differ} samples differ");
+                assert_eq!(
+                    differ, 0,
+                    "{p} frames, black {black}: {differ} samples differ"
+                );
             }
         }
     }
