@@ -52,6 +52,7 @@
 
 mod consistency;
 mod flags;
+#[allow(unsafe_code)] // std::arch gathers, loads and stores; see the module's SAFETY notes.
 mod fused;
 mod hat;
 mod linear;
