@@ -26,6 +26,20 @@ fn shifted_frame(i: usize, dx: i32, dy: i32, out: &Path) -> PathBuf {
     p
 }
 
+/// Frame 1 (the middle exposure) is the reference; the others moved as a hand would.
+const SHIFTS: [(i32, i32); 3] = [(6, -4), (0, 0), (-9, 5)];
+
+/// The demo bracket as it is (in `dir`) and moved by [`SHIFTS`] (in `dir/moved`).
+fn steady_and_moved(dir: &Path) -> (Vec<PathBuf>, Vec<PathBuf>, PathBuf) {
+    let steady: Vec<PathBuf> = (0..3).map(|i| shifted_frame(i, 0, 0, dir)).collect();
+    let moved_dir = dir.join("moved");
+    std::fs::create_dir(&moved_dir).unwrap();
+    let moved: Vec<PathBuf> = (0..3)
+        .map(|i| shifted_frame(i, SHIFTS[i].0, SHIFTS[i].1, &moved_dir))
+        .collect();
+    (steady, moved, moved_dir)
+}
+
 fn run(args: &[std::ffi::OsString]) -> serde_json::Value {
     let o = Command::new(BIN).args(args).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -87,14 +101,7 @@ fn rms(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
 #[test]
 fn calibrate_align_finds_the_shifts_merge_finds_and_recovers_the_steady_curve() {
     let tmp = tempfile::tempdir().unwrap();
-    let steady: Vec<PathBuf> = (0..3).map(|i| shifted_frame(i, 0, 0, tmp.path())).collect();
-    let moved_dir = tmp.path().join("moved");
-    std::fs::create_dir(&moved_dir).unwrap();
-    // Frame 1 (the middle exposure) is the reference; the others moved as a hand would.
-    let truth = [(6, -4), (0, 0), (-9, 5)];
-    let moved: Vec<PathBuf> = (0..3)
-        .map(|i| shifted_frame(i, truth[i].0, truth[i].1, &moved_dir))
-        .collect();
+    let (steady, moved, moved_dir) = steady_and_moved(tmp.path());
 
     let (_, g_steady) = calibrate(&steady, false, tmp.path());
     let (plain, g_plain) = calibrate(&moved, false, &moved_dir);
@@ -137,13 +144,7 @@ fn calibrate_align_finds_the_shifts_merge_finds_and_recovers_the_steady_curve() 
 #[test]
 fn colour_hdri_histogram_samples_need_no_alignment() {
     let tmp = tempfile::tempdir().unwrap();
-    let steady: Vec<PathBuf> = (0..3).map(|i| shifted_frame(i, 0, 0, tmp.path())).collect();
-    let moved_dir = tmp.path().join("moved");
-    std::fs::create_dir(&moved_dir).unwrap();
-    let truth = [(6, -4), (0, 0), (-9, 5)];
-    let moved: Vec<PathBuf> = (0..3)
-        .map(|i| shifted_frame(i, truth[i].0, truth[i].1, &moved_dir))
-        .collect();
+    let (steady, moved, moved_dir) = steady_and_moved(tmp.path());
     let method = ["--method", "colour-hdri"];
     let (report, g_steady) = calibrate_with(&steady, &method, tmp.path());
     assert_eq!(report["sampling"]["histogram"], true, "{report}");

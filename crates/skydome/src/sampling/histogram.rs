@@ -148,28 +148,10 @@ fn nearest_rank(cdf: &[f64; BINS], u: f64) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bracket::Exposure;
 
-    /// A `w × w` frame whose pixel `(x, y)` has code `code(x, y)` in every channel.
+    /// A square grey frame (see the sampling tests' `grey_frame`).
     fn frame(w: usize, t: f64, code: impl Fn(usize, usize) -> u8) -> Frame {
-        let mut v = Vec::with_capacity(w * w * 3);
-        for y in 0..w {
-            for x in 0..w {
-                let z = code(x, y);
-                v.extend_from_slice(&[z, z, z]);
-            }
-        }
-        Frame {
-            name: format!("t{t}"),
-            width: w,
-            height: w,
-            pixels: Pixels::U8(v),
-            exposure: Exposure {
-                time_s: t,
-                iso: None,
-                f_number: None,
-            },
-        }
+        super::super::tests::grey_frame(w, w, t, code)
     }
 
     /// Two frames of one scene through one monotone response, the second twice as long and

@@ -1072,29 +1072,41 @@ mod tests {
     }
     use crate::bracket::Exposure;
 
+    /// A `w × h` grey frame of exposure `t` s whose pixel `(x, y)` has code `code(x, y)`.
+    pub(super) fn grey_frame(
+        w: usize,
+        h: usize,
+        t: f64,
+        code: impl Fn(usize, usize) -> u8,
+    ) -> Frame {
+        let mut v = Vec::with_capacity(w * h * 3);
+        for y in 0..h {
+            for x in 0..w {
+                let z = code(x, y);
+                v.extend_from_slice(&[z, z, z]);
+            }
+        }
+        Frame {
+            name: format!("t{t}"),
+            width: w,
+            height: h,
+            pixels: Pixels::U8(v),
+            exposure: Exposure {
+                time_s: t,
+                iso: None,
+                f_number: None,
+            },
+        }
+    }
+
     fn gradient_frames(w: usize, h: usize) -> Vec<Frame> {
         [0.25f64, 1.0, 4.0]
             .iter()
             .map(|&t| {
-                let mut v = Vec::with_capacity(w * h * 3);
-                for y in 0..h {
-                    for x in 0..w {
-                        let e = (x + y) as f64 / (w + h) as f64;
-                        let z = (255.0 * (e * t).min(1.0)).round() as u8;
-                        v.extend_from_slice(&[z, z, z]);
-                    }
-                }
-                Frame {
-                    name: format!("t{t}"),
-                    width: w,
-                    height: h,
-                    pixels: Pixels::U8(v),
-                    exposure: Exposure {
-                        time_s: t,
-                        iso: None,
-                        f_number: None,
-                    },
-                }
+                grey_frame(w, h, t, |x, y| {
+                    let e = (x + y) as f64 / (w + h) as f64;
+                    (255.0 * (e * t).min(1.0)).round() as u8
+                })
             })
             .collect()
     }
