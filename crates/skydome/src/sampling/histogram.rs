@@ -17,7 +17,8 @@
 //! get no weight from the hat in the solve.
 
 use super::{
-    check_frames, code_range, usable_area, SampleOptions, SampleReport, Samples, SamplingError,
+    check_frames, code_range, empty_area, usable_area, SampleOptions, SampleReport, Samples,
+    SamplingError,
 };
 use crate::bracket::{Frame, Pixels};
 use crate::image::Circle;
@@ -104,13 +105,7 @@ fn histograms(
     }
     if let (0, Some(c)) = (pixels, circle) {
         // A circle so small that no pixel centre lies inside it.
-        return Err(SamplingError::EmptyArea {
-            cx: c.cx,
-            cy: c.cy,
-            r: c.r,
-            width: w,
-            height: h,
-        });
+        return Err(empty_area(c, w, h));
     }
     Ok(hist)
 }

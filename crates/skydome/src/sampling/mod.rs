@@ -622,15 +622,20 @@ fn usable_area(
     }
     let (xs, ys) = c.pixel_bounds(w, h);
     if xs.is_empty() || ys.is_empty() {
-        return Err(SamplingError::EmptyArea {
-            cx: c.cx,
-            cy: c.cy,
-            r: c.r,
-            width: w,
-            height: h,
-        });
+        return Err(empty_area(c, w, h));
     }
     Ok((xs.start, ys.start, xs.end, ys.end))
+}
+
+/// The error for a circle with no pixel of the `w × h` frame inside it.
+fn empty_area(c: Circle, w: usize, h: usize) -> SamplingError {
+    SamplingError::EmptyArea {
+        cx: c.cx,
+        cy: c.cy,
+        r: c.r,
+        width: w,
+        height: h,
+    }
 }
 
 /// The number of samples aimed at: the request, raised so that `N · (P − 1) ≥ 255` when asked.
