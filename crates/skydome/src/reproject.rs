@@ -625,7 +625,9 @@ pub fn horizontal_irradiance_fisheye(img: &HdrImage, geom: &SkyGeometry) -> [f64
     let row_sum = |y: usize| -> [f64; 3] {
         let mut acc = [0.0f64; 3];
         let dy = y as f64 + 0.5 - cy;
-        for x in x0..x1 {
+        // Pixels beyond `around` (centre more than a pixel past the horizon) weigh nothing.
+        let (a, e) = around.row_span(y, img.width);
+        for x in a.max(x0)..e.min(x1) {
             let dx = x as f64 + 0.5 - cx;
             let rho = (dx * dx + dy * dy).sqrt();
             let w = if (rho - r90).abs() < 0.75 {

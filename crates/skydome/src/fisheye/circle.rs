@@ -34,25 +34,17 @@ pub(crate) fn detect_circle_rgb8(
     height: usize,
 ) -> Result<CircleFit, FisheyeError> {
     crate::image::check_samples(rgb.len(), width, height, 3)?;
-    let mut luma = vec![0u8; width * height];
-    let max_rgb = |(o, c): (&mut [u8], &[u8])| {
-        for (l, p) in o.iter_mut().zip(c.chunks_exact(3)) {
+    if width < 16 || height < 16 {
+        return Err(FisheyeError::ImageTooSmall { width, height });
+    }
+    // The maximum of R, G and B per pixel, a band's rows at a time (no whole-image copy).
+    let max_rgb = |y: usize, out: &mut [u8]| {
+        let row = &rgb[3 * y * width..3 * (y + 1) * width];
+        for (l, p) in out.iter_mut().zip(row.chunks_exact(3)) {
             *l = p[0].max(p[1]).max(p[2]);
         }
     };
-    let rows = width * 64;
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        luma.par_chunks_mut(rows)
-            .zip(rgb.par_chunks(3 * rows))
-            .for_each(max_rgb);
-    }
-    #[cfg(not(feature = "parallel"))]
-    luma.chunks_mut(rows)
-        .zip(rgb.chunks(3 * rows))
-        .for_each(max_rgb);
-    detect_circle_luma(&luma, width, height)
+    detect_in(&Blurred::from_rows(width, height, max_rgb))
 }
 
 /// [`detect_circle`] on a single-channel 8-bit image (`width * height` samples, row-major,
@@ -66,8 +58,16 @@ pub fn detect_circle_luma(
         return Err(FisheyeError::ImageTooSmall { width, height });
     }
     crate::image::check_samples(luma.len(), width, height, 1)?;
-    let img = Blurred::new(luma, width, height);
-    let (housing, threshold) = housing_threshold(&img);
+    let img = Blurred::from_rows(width, height, |y, out: &mut [u8]| {
+        out.copy_from_slice(&luma[y * width..(y + 1) * width]);
+    });
+    detect_in(&img)
+}
+
+/// The circle in a blurred image (at least 16 × 16).
+fn detect_in(img: &Blurred) -> Result<CircleFit, FisheyeError> {
+    let (width, height) = (img.w, img.h);
+    let (housing, threshold) = housing_threshold(img);
 
     // Rough centre: centroid of the pixels above threshold (whole pixel sums, exact in u64).
     let above = img.first_sum_above(threshold);
@@ -108,7 +108,7 @@ pub fn detect_circle_luma(
     // Two passes: the centroid is biased when the circle is cut by the frame; rays cast from the
     // first fit's centre meet the boundary more squarely.
     for _ in 0..2 {
-        let pts = boundary_points(&img, centre, housing, threshold);
+        let pts = boundary_points(img, centre, housing, threshold);
         let fit = robust_circle_fit(&pts)?;
         centre = (fit.circle.cx, fit.circle.cy);
         best = Some(fit);
@@ -117,7 +117,7 @@ pub fn detect_circle_luma(
     if !plausible(&fit.circle, width, height) {
         return Err(FisheyeError::NoCircle { points: fit.points });
     }
-    doubt_housing(&img, housing, &fit.circle)?;
+    doubt_housing(img, housing, &fit.circle)?;
     Ok(fit)
 }
 
@@ -192,35 +192,41 @@ struct Blurred {
 const MAX_SUM: usize = 9 * 255;
 
 impl Blurred {
-    fn new(src: &[u8], w: usize, h: usize) -> Self {
+    /// The blur of the `w × h` image whose row `y` `row(y, out)` writes into `out` (`w`
+    /// samples). Bands of rows in parallel (with the `parallel` feature), each reading its rows
+    /// and the one above and below into a small buffer of its own.
+    fn from_rows(w: usize, h: usize, row: impl Fn(usize, &mut [u8]) + Sync) -> Self {
+        const BAND: usize = 64;
         let mut sums = vec![0u16; w * h];
-        // Column sums of three rows, then three columns of those.
-        // Zipped slices, no index arithmetic per pixel, so both passes vectorise (w ≥ 16).
-        let row = |(y, out): (usize, &mut [u16])| {
-            let r = |yy: usize| &src[yy * w..][..w];
-            let (a, b, c) = (r(y.saturating_sub(1)), r(y), r((y + 1).min(h - 1)));
-            let mut col = vec![0u16; w];
-            for (((s, &a), &b), &c) in col.iter_mut().zip(a).zip(b).zip(c) {
-                *s = u16::from(a) + u16::from(b) + u16::from(c);
+        let band = |(b, out): (usize, &mut [u16])| {
+            let y0 = b * BAND;
+            let y1 = y0 + out.len() / w;
+            // Source rows y0 − 1 ..= y1 (clamped to the image: edge rows replicate).
+            let first = y0.saturating_sub(1);
+            let last = y1.min(h - 1);
+            let mut src = vec![0u8; (last + 1 - first) * w];
+            for (y, r) in (first..=last).zip(src.chunks_exact_mut(w)) {
+                row(y, r);
             }
-            out[0] = 2 * col[0] + col[1];
-            out[w - 1] = col[w - 2] + 2 * col[w - 1];
-            let inner = out[1..w - 1]
-                .iter_mut()
-                .zip(&col[..w - 2])
-                .zip(&col[1..w - 1])
-                .zip(&col[2..]);
-            for (((o, &l), &m), &r) in inner {
-                *o = l + m + r;
+            let r = |yy: usize| &src[(yy - first) * w..][..w];
+            let mut col = vec![0u16; w];
+            for (y, out) in (y0..y1).zip(out.chunks_exact_mut(w)) {
+                blur_row(
+                    r(y.saturating_sub(1)),
+                    r(y),
+                    r((y + 1).min(h - 1)),
+                    &mut col,
+                    out,
+                );
             }
         };
         #[cfg(feature = "parallel")]
         {
             use rayon::prelude::*;
-            sums.par_chunks_mut(w).enumerate().for_each(row);
+            sums.par_chunks_mut(w * BAND).enumerate().for_each(band);
         }
         #[cfg(not(feature = "parallel"))]
-        sums.chunks_mut(w).enumerate().for_each(row);
+        sums.chunks_mut(w * BAND).enumerate().for_each(band);
         Self { sums, w, h }
     }
 
@@ -235,6 +241,27 @@ impl Blurred {
         (0..=MAX_SUM as u16)
             .find(|&s| Self::value(s) > threshold)
             .unwrap_or(MAX_SUM as u16 + 1)
+    }
+}
+
+/// One row of the 3×3 window sums from the rows above (`a`), at (`b`) and below (`c`):
+/// column sums of the three rows into `col`, then three columns of those (edges replicate).
+/// Zipped slices, no index arithmetic per pixel, so both passes vectorise (w ≥ 16).
+#[inline]
+fn blur_row(a: &[u8], b: &[u8], c: &[u8], col: &mut [u16], out: &mut [u16]) {
+    let w = out.len();
+    for (((s, &a), &b), &c) in col.iter_mut().zip(a).zip(b).zip(c) {
+        *s = u16::from(a) + u16::from(b) + u16::from(c);
+    }
+    out[0] = 2 * col[0] + col[1];
+    out[w - 1] = col[w - 2] + 2 * col[w - 1];
+    let inner = out[1..w - 1]
+        .iter_mut()
+        .zip(&col[..w - 2])
+        .zip(&col[1..w - 1])
+        .zip(&col[2..]);
+    for (((o, &l), &m), &r) in inner {
+        *o = l + m + r;
     }
 }
 

@@ -72,7 +72,80 @@ pub fn crop_dome_from(
         r,
     };
     let mut out = HdrImage::new(n, n);
+    copy_dome(img, origin, (ox, oy), &horizon, &mut out);
+    Ok(DomeCrop {
+        image: out,
+        horizon,
+        offset_x: ox,
+        offset_y: oy,
+        crop_radius_px: r,
+    })
+}
+
+/// As [`crop_dome_from`], taking `img`: when `img` is the crop's square itself (the pipeline
+/// merges only that square when nothing else reads the photo) the pixels beyond the crop circle
+/// are zeroed where they are, with no second image; otherwise the square is copied. The result
+/// is the same either way.
+pub fn crop_dome_owned(
+    mut img: HdrImage,
+    origin: (i64, i64),
+    lens: &LensProfile,
+    fov_out_deg: f64,
+) -> Result<DomeCrop, FisheyeError> {
+    let (ox, oy, n, r) = dome_crop_box(lens, fov_out_deg)?;
+    if origin != (ox, oy) || (img.width, img.height) != (n, n) || img.data.len() != 3 * n * n {
+        return crop_dome_from(&img, origin, lens, fov_out_deg);
+    }
+    let horizon = Circle {
+        cx: lens.circle.cx - ox as f64,
+        cy: lens.circle.cy - oy as f64,
+        r,
+    };
     let r2 = r * r;
+    // Every pixel of the square lies in the source: the copy would keep the pixels inside the
+    // circle and leave the others zero.
+    let clear_row = |(y, row): (usize, &mut [f32])| {
+        let dy = y as f64 + 0.5 - horizon.cy;
+        for (x, px) in row.chunks_exact_mut(3).enumerate() {
+            let dx = x as f64 + 0.5 - horizon.cx;
+            if dx * dx + dy * dy > r2 {
+                px.fill(0.0);
+            }
+        }
+    };
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        img.data
+            .par_chunks_exact_mut(3 * n.max(1))
+            .enumerate()
+            .for_each(clear_row);
+    }
+    #[cfg(not(feature = "parallel"))]
+    img.data
+        .chunks_exact_mut(3 * n.max(1))
+        .enumerate()
+        .for_each(clear_row);
+    Ok(DomeCrop {
+        image: img,
+        horizon,
+        offset_x: ox,
+        offset_y: oy,
+        crop_radius_px: r,
+    })
+}
+
+/// Copies the pixels of `img` (whose pixel (0, 0) is the source's pixel `origin`) that fall
+/// inside `horizon` into `out`, the square whose pixel (0, 0) is the source's `(ox, oy)`.
+fn copy_dome(
+    img: &HdrImage,
+    origin: (i64, i64),
+    (ox, oy): (i64, i64),
+    horizon: &Circle,
+    out: &mut HdrImage,
+) {
+    let n = out.width;
+    let r2 = horizon.r * horizon.r;
     let copy_row = |(y, row): (usize, &mut [f32])| {
         let sy = oy + y as i64 - origin.1;
         if sy < 0 || sy >= img.height as i64 {
@@ -104,11 +177,4 @@ pub fn crop_dome_from(
         .chunks_exact_mut(3 * n.max(1))
         .enumerate()
         .for_each(copy_row);
-    Ok(DomeCrop {
-        image: out,
-        horizon,
-        offset_x: ox,
-        offset_y: oy,
-        crop_radius_px: r,
-    })
 }

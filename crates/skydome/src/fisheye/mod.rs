@@ -63,7 +63,7 @@ mod projection;
 
 pub(crate) use circle::detect_circle_rgb8;
 pub use circle::{detect_circle, detect_circle_luma, CircleFit};
-pub use crop::{crop_dome, crop_dome_from, dome_crop_box, DomeCrop};
+pub use crop::{crop_dome, crop_dome_from, crop_dome_owned, dome_crop_box, DomeCrop};
 pub use fit::{fit_projection, parse_angle_radius_csv, AngleRadius, LensFit, ModelFit};
 pub use flat_field::{flat_field_falloff, RING_DEG};
 pub use profile::{devignette, LensProfile, Vignetting, LENS_PROFILE_VERSION};

@@ -686,7 +686,7 @@ fn frame(
 ) -> Result<Framed, PipelineError> {
     Ok(match crop_fov_deg {
         Some(fov) => {
-            let c = fisheye::crop_dome_from(&radiance, origin, lens, fov)?;
+            let c = fisheye::crop_dome_owned(radiance, origin, lens, fov)?;
             Framed {
                 geom: full.with_centre(c.horizon.cx, c.horizon.cy),
                 offset: (c.offset_x as f64, c.offset_y as f64),

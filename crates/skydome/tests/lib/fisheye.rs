@@ -130,6 +130,76 @@ fn crop_radius_is_exact_and_everything_beyond_the_horizon_is_zero() {
     }
 }
 
+/// The owned crop (the pipeline's: the merged square itself, zeroed beyond the circle where it
+/// lies) gives the copying crop's result bit for bit, on the crop's own square (in place, the
+/// same buffer kept) and on any other part of the frame (copied).
+#[test]
+fn owned_crop_equals_the_copy_in_place_or_not() {
+    let dome = Dome {
+        width: 420,
+        height: 360,
+        cx: 211.3,
+        cy: 178.8,
+        lens: Lens::for_circle("stereographic", 235.0, 160.0),
+        visible_r: 160.0,
+        north_deg: 0.0,
+        housing: 0.0,
+        ss: 1,
+    };
+    // Values that differ everywhere, a negative zero and a NaN inside the circle: copied as
+    // they are either way.
+    let mut img = dome.render(&|az, el| [1.0 + el as f32, 2.0 + az as f32, 3.0]);
+    let c = 3 * (179 * img.width + 211);
+    img.data[c] = -0.0;
+    img.data[c + 1] = f32::NAN;
+    let lens = LensProfile::from_fov(
+        Circle {
+            cx: dome.cx,
+            cy: dome.cy,
+            r: 160.0,
+        },
+        235.0,
+        LensKind::Stereographic,
+    )
+    .unwrap();
+    let bits = |c: &DomeCrop| c.image.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let want = crop_dome(&img, &lens, 180.0).unwrap();
+    assert!(want.image.data.contains(&0.0) && want.image.data.iter().any(|v| *v > 0.0));
+    // The crop's square alone, as the pipeline merges it.
+    let (ox, oy, n, _) = dome_crop_box(&lens, 180.0).unwrap();
+    assert!(ox >= 0 && oy >= 0 && ox as usize + n <= img.width && oy as usize + n <= img.height);
+    let mut square = skydome::image::HdrImage::new(n, n);
+    for y in 0..n {
+        let s = 3 * ((oy as usize + y) * img.width + ox as usize);
+        square.data[3 * y * n..3 * (y + 1) * n].copy_from_slice(&img.data[s..s + 3 * n]);
+    }
+    let before = square.data.as_ptr();
+    let got = crop_dome_owned(square, (ox, oy), &lens, 180.0).unwrap();
+    assert_eq!(got.image.data.as_ptr(), before, "cropped in place");
+    assert_eq!(bits(&got), bits(&want));
+    assert_eq!(
+        (got.horizon, got.offset_x, got.offset_y, got.crop_radius_px),
+        (
+            want.horizon,
+            want.offset_x,
+            want.offset_y,
+            want.crop_radius_px
+        )
+    );
+    // The whole frame (not the square): copied, the same result.
+    let whole = crop_dome_owned(img.clone(), (0, 0), &lens, 180.0).unwrap();
+    assert_eq!(bits(&whole), bits(&want));
+    // A window that starts elsewhere than the square: copied, the same result.
+    let mut part = skydome::image::HdrImage::new(img.width - 2, img.height - 1);
+    for y in 0..part.height {
+        let s = 3 * ((y + 1) * img.width + 2);
+        part.data[3 * y * part.width..3 * (y + 1) * part.width]
+            .copy_from_slice(&img.data[s..s + 3 * part.width]);
+    }
+    let moved = crop_dome_owned(part, (2, 1), &lens, 180.0).unwrap();
+    assert_eq!(bits(&moved), bits(&want));
+}
+
 fn samples(lens: Lens, noise_px: f64) -> Vec<AngleRadius> {
     let mut rng = Noise::new(7);
     (1..=23)
