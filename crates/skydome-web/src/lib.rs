@@ -406,6 +406,16 @@ pub fn join_decoded(meta_json: &str, pixels: Vec<u8>) -> Result<DecodedFrame, We
     })
 }
 
+/// Whether a run with `options_json` ([`Options`] as JSON) reads encoded photos one at a time
+/// ([`pipeline::streams`]: a plain crop to the dome), so the page should hand it the files
+/// rather than decode them beforehand (all of a bracket's photos decoded at once are what
+/// reading them in turn keeps out of memory). Options that do not parse: `false` (the run
+/// reports them).
+#[wasm_bindgen]
+pub fn streams_frames(options_json: &str) -> bool {
+    parse_options(options_json).is_ok_and(|o| pipeline::streams(&o))
+}
+
 /// A photo decoded in a decoding worker ([`decode_photo`]).
 #[wasm_bindgen]
 pub struct DecodedPhoto {

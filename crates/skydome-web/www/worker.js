@@ -12,7 +12,7 @@
 // sets the pool's size; 0 forces the single-threaded build.
 
 let Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
-  list_times, decoding_progress, sentence, warm_up;
+  list_times, decoding_progress, sentence, warm_up, streams_frames;
 /** Which core runs: {build: 'threaded' | 'single', threads, reason} (reason: why single). */
 let coreInfo = null;
 
@@ -46,7 +46,7 @@ let memoryRef = null;
 const ready = loadCore().then(({ m, wasm, info }) => {
   ({
     Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
-    list_times, decoding_progress, sentence, warm_up,
+    list_times, decoding_progress, sentence, warm_up, streams_frames,
   } = m);
   coreInfo = info;
   memoryRef = wasm.memory || null;
@@ -110,12 +110,16 @@ function retireHelpers() {
 // Decodes `frames` into a new job: photo i goes to helper i mod (helpers + 1) when that is a
 // helper, else this worker decodes it while the helpers work. The first photo's error wins, as
 // when the core decodes them in turn.
-async function decodeInto(id, frames) {
+async function decodeInto(id, frames, optionsJson) {
   const j = new Job();
   for (const f of frames) j.add_frame(f.name, new Uint8Array(f.bytes));
   // The threaded core decodes the photos itself, several at once in its own pool (one memory,
   // no decoding workers' memories beside it).
   if (coreInfo && coreInfo.build === 'threaded') return j;
+  // A run the core reads one photo at a time (a plain crop to the dome: skydome::pipeline::streams)
+  // gets the files: decoded here beforehand, every photo of the bracket would be in memory at
+  // once (9 × 36 MB for a phone's 12 MP bracket), which is what reading them in turn avoids.
+  if (streams_frames(optionsJson)) return j;
   const shares = helpers.length + 1;
   const errors = new Array(frames.length).fill(null);
   let done = 0;
@@ -230,7 +234,7 @@ async function decodeAndRun(id, options, times) {
   merged = true;
   const t0 = performance.now();
   try {
-    job = await decodeInto(id, photos);
+    job = await decodeInto(id, photos, options);
     stopHelpers();
     const decodeMs = performance.now() - t0;
     const result = runJob(id, options, times);

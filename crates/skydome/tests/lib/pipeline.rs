@@ -537,3 +537,122 @@ fn a_dome_merged_in_its_square_is_the_whole_merge_cropped() {
         );
     }
 }
+
+/// A plain crop of encoded photos is read one frame at a time (the scan, then the second pass
+/// that gathers the window, the flags and the sampler's values): the run must give what the
+/// whole decoded frames give, bit for bit — the dome, its header, the pictures, the report
+/// and the camera profile — for a 9- and a 3-frame bracket, the circle detected, with the
+/// default calibration, the stratified noise-weighted one and a camera profile. The streamed
+/// run shows itself by reporting the calibrating stage frame by frame.
+#[test]
+fn a_bracket_read_one_frame_at_a_time_gives_the_whole_frames_bytes() {
+    use skydome::formats::picture::{encode_rgb8, PictureFormat};
+    use skydome::image::RgbImage;
+    use skydome::response::CalibrateOptions;
+    for evs in [
+        vec![-4.0, -3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0, 4.0],
+        vec![-2.0, 0.0, 2.0],
+    ] {
+        let b = skydome::synth::generate(&skydome::synth::SynthOptions {
+            width: 400,
+            height: 340,
+            evs: evs.clone(),
+            ..Default::default()
+        })
+        .expect("synth");
+        let times: Vec<f64> = b.frames.iter().map(|f| f.exposure.time_s).collect();
+        let encoded: Vec<EncodedFrame> = b
+            .frames
+            .iter()
+            .map(|f| {
+                let Pixels::U8(v) = &f.pixels else {
+                    panic!("8-bit synth")
+                };
+                let img = RgbImage {
+                    width: f.width,
+                    height: f.height,
+                    data: v.clone(),
+                };
+                EncodedFrame {
+                    name: format!("{}.jpg", f.name),
+                    bytes: encode_rgb8(&img, PictureFormat::Jpeg { quality: 92 }).expect("jpeg"),
+                }
+            })
+            .collect();
+        let decoded = || -> Vec<DecodedFrame> {
+            encoded
+                .iter()
+                .map(|e| bracket::decode(&e.name, &e.bytes, &Default::default()).expect("decode"))
+                .collect()
+        };
+        let base = Options {
+            lens: LensSource::Detect {
+                model: LensKind::Stereographic,
+                fov_deg: 235.0,
+                circle: None,
+            },
+            sky: SkyOptions {
+                crop: true,
+                sun: pipeline::SunMode::Auto,
+                north_deg: Some(10.0),
+                ..SkyOptions::default()
+            },
+            products: pipeline::Products {
+                preview: true,
+                ..pipeline::Products::default()
+            },
+            ..Options::default()
+        };
+        let noise = Options {
+            response: pipeline::ResponseSource::Calibrate(CalibrateOptions::noise_fit()),
+            ..base.clone()
+        };
+        let run = |frames: Frames, o: &Options| {
+            let mut per_frame = false;
+            let dome = pipeline::run(
+                Input {
+                    times: Some(times.clone()),
+                    ..Input::new(frames)
+                },
+                o,
+                &mut |p: &Progress| {
+                    per_frame |=
+                        p.stage == Stage::Calibrating && p.fraction > 0.0 && p.fraction < 1.0;
+                    ControlFlow::Continue(())
+                },
+            )
+            .expect("run");
+            (dome, per_frame)
+        };
+        let first = run(Frames::Decoded(decoded()), &base).0;
+        let profiled = Options {
+            response: pipeline::ResponseSource::Profile(
+                first.camera_profile.clone().expect("a profile"),
+            ),
+            ..base.clone()
+        };
+        for o in [&base, &noise, &profiled] {
+            let (whole, streamed_whole) = run(Frames::Decoded(decoded()), o);
+            let (streamed, streamed_flag) = run(Frames::Encoded(encoded.clone()), o);
+            assert!(!streamed_whole && streamed_flag, "{evs:?}: not streamed");
+            let hdr = |d: &pipeline::Dome| {
+                formats::encode_radiance(&d.radiance, &d.meta, RadianceFormat::Hdr)
+                    .expect("hdr")
+                    .bytes
+            };
+            assert!(hdr(&whole) == hdr(&streamed), "{evs:?}: the .hdr differs");
+            assert_eq!(whole.preview, streamed.preview);
+            assert_eq!(json(&whole.report), json(&streamed.report), "{evs:?}");
+            assert_eq!(
+                json(&whole.camera_profile),
+                json(&streamed.camera_profile),
+                "{evs:?}"
+            );
+            assert!(whole.report.clipped_high_pixels + whole.report.clipped_low_pixels > 0);
+        }
+    }
+}
+
+fn json<T: serde::Serialize>(v: &T) -> String {
+    serde_json::to_string(v).expect("json")
+}
