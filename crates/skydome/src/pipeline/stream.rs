@@ -90,38 +90,18 @@ pub(super) fn intake(
     progress: &mut Reporter<'_>,
 ) -> Result<Option<Intake>, PipelineError> {
     let Frames::Encoded(frames) = &input.frames else {
-        {
-            if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                eprintln!("stream fallback at line 86");
-            }
-            return Ok(None);
-        }
+        return Ok(None);
     };
     if frames.len() < 2 || !streams(options) {
-        {
-            if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                eprintln!("stream fallback at line 89");
-            }
-            return Ok(None);
-        }
+        return Ok(None);
     }
     let times = input.times.as_deref();
     if times.is_some_and(|t| t.len() != frames.len()) {
-        {
-            if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                eprintln!("stream fallback at line 93");
-            }
-            return Ok(None);
-        }
+        return Ok(None);
     }
     progress.at(Stage::Decoding, 0.0)?;
     let Some(scan) = scan(frames, input, progress)? else {
-        {
-            if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                eprintln!("stream fallback at line 97");
-            }
-            return Ok(None);
-        }
+        return Ok(None);
     };
     let Scan {
         thumbs,
@@ -131,44 +111,24 @@ pub(super) fn intake(
     let Ok(mut br) =
         bracket::assemble_thumbnails(thumbs, times, input.orientation, options.black_level)
     else {
-        {
-            if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                eprintln!("stream fallback at line 107");
-            }
-            return Ok(None);
-        }
+        return Ok(None);
     };
     if br.frames.len() != frames.len() {
-        {
-            if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                eprintln!("stream fallback at line 110");
-            }
-            return Ok(None);
-        }
+        return Ok(None);
     }
     progress.at(Stage::Decoding, 1.0)?;
     // The input index of each frame of the bracket (exposures differ by 1/6 stop at least).
     let mut order = Vec::with_capacity(br.frames.len());
     for f in &mut br.frames {
         let Some(i) = exposures.iter().position(|e| *e == f.exposure) else {
-            {
-                if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                    eprintln!("stream fallback at line 117");
-                }
-                return Ok(None);
-            }
+            return Ok(None);
         };
         order.push(i);
         f.pixels = Pixels::U8(Vec::new());
     }
     let (w, h) = (br.width(), br.height());
     let Some((best_index, best_pixels)) = best else {
-        {
-            if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                eprintln!("stream fallback at line 124");
-            }
-            return Ok(None);
-        }
+        return Ok(None);
     };
 
     progress.at(Stage::Lens, 0.0)?;
@@ -179,28 +139,13 @@ pub(super) fn intake(
         })
     };
     let Ok(lens) = lens_of(&options.lens, detect) else {
-        {
-            if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                eprintln!("stream fallback at line 137");
-            }
-            return Ok(None);
-        }
+        return Ok(None);
     };
     let Some((profile, _)) = lens.as_ref() else {
-        {
-            if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                eprintln!("stream fallback at line 140");
-            }
-            return Ok(None);
-        }
+        return Ok(None);
     };
     let Some(window) = merge_window(options, profile, (w, h), true, false) else {
-        {
-            if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                eprintln!("stream fallback at line 143");
-            }
-            return Ok(None);
-        }
+        return Ok(None);
     };
     progress.at(Stage::Lens, 1.0)?;
 
@@ -246,12 +191,7 @@ pub(super) fn intake(
         let done = in_parallel(group, |&j| (order[j] != best_index).then(|| read(order[j])));
         for (d, &j) in done.into_iter().zip(group) {
             let Some(px) = d.unwrap_or_else(|| best.take()) else {
-                {
-                    if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                        eprintln!("stream fallback at line 189");
-                    }
-                    return Ok(None);
-                }
+                return Ok(None);
             };
             let px = Pixels::U8(px);
             for g in gathered.iter_mut() {
@@ -289,24 +229,14 @@ pub(super) fn intake(
                     Ok(Err(Missing(more))) => {
                         rounds += 1;
                         if rounds > MAX_GATHER_ROUNDS {
-                            {
-                                if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                                    eprintln!("stream fallback at line 227");
-                                }
-                                return Ok(None);
-                            }
+                            return Ok(None);
                         }
                         let mut g = Gathered::new(&more, order.len(), o.sampling.patch, (w, h));
                         for group in all.chunks(group_size()) {
                             let done = in_parallel(group, |&j| read(order[j]));
                             for (d, &j) in done.into_iter().zip(group) {
                                 let Some(px) = d else {
-                                    {
-                                        if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                                            eprintln!("stream fallback at line 234");
-                                        }
-                                        return Ok(None);
-                                    }
+                                    return Ok(None);
                                 };
                                 g.add_frame(j, &Pixels::U8(px));
                             }
@@ -357,12 +287,7 @@ fn scan(
         let done = in_parallel(group, |&i| decode_oriented(&frames[i], input));
         for (d, &i) in done.into_iter().zip(group) {
             let Some(Decoded { mut frame, .. }) = d else {
-                {
-                    if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                        eprintln!("stream fallback at line 285");
-                    }
-                    return Ok(None);
-                }
+                return Ok(None);
             };
             let time_s = match (input.times.as_deref(), frame.exif_time_s) {
                 (Some(t), _) => t[i],
@@ -376,12 +301,7 @@ fn scan(
             };
             let Pixels::U8(px) = std::mem::replace(&mut frame.pixels, Pixels::U8(Vec::new()))
             else {
-                {
-                    if std::env::var_os("SKYDOME_DEBUG_STREAM").is_some() {
-                        eprintln!("stream fallback at line 299");
-                    }
-                    return Ok(None);
-                }
+                return Ok(None);
             };
             // `bracket::best_exposed`'s count and its choice: the most, and of equals the
             // last in exposure order.
