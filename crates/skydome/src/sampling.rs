@@ -462,7 +462,7 @@ pub fn sample(
     let whole = Whole { frames, size };
     match sample_from(&whole, size, circle, opts)? {
         Ok(s) => Ok(s),
-        // The whole frames answer every read.
+        // Unreachable: the whole frames answer every read.
         Err(Missing(_)) => Err(SamplingError::NoFrames),
     }
 }
@@ -736,7 +736,6 @@ fn sample_once(
         missing: None,
         circle,
         opts,
-        size: (w, h),
         area,
         report,
         positions: Vec::with_capacity(target),
@@ -779,18 +778,11 @@ fn sample_once(
                 Err(m) => return Ok(Err(m)),
             },
         };
-        report.band_samples = match fill_bands(
-            src,
-            &lat,
-            opts,
-            (w, h),
-            &mut report,
-            &mut positions,
-            &mut values,
-        ) {
-            Ok(n) => n,
-            Err(m) => return Ok(Err(m)),
-        };
+        report.band_samples =
+            match fill_bands(src, &lat, opts, &mut report, &mut positions, &mut values) {
+                Ok(n) => n,
+                Err(m) => return Ok(Err(m)),
+            };
     }
     report.used = positions.len();
     report.code_range = code_range(&values);
@@ -874,7 +866,6 @@ struct Draws<'a> {
     missing: Option<Vec<(usize, usize)>>,
     circle: Option<Circle>,
     opts: &'a SampleOptions,
-    size: (usize, usize),
     /// `(x0, y0, x1, y1)` of [`usable_area`].
     area: (usize, usize, usize, usize),
     report: SampleReport,
@@ -974,7 +965,6 @@ impl Draws<'_> {
 
     /// Reads the patch means at `(x, y)` into the scratch values and judges the position.
     fn judge(&mut self, x: usize, y: usize) -> Result<(), Refusal> {
-        let (w, h) = self.size;
         let opts = self.opts;
         if let Some(c) = self.circle {
             if !c.contains_pixel(x, y) {
@@ -984,7 +974,6 @@ impl Draws<'_> {
         if opts.reject && !self.taken.insert((x, y)) {
             return Err(Refusal::Taken);
         }
-        let _ = (w, h);
         if !self.src.means(x, y, opts.patch, &mut self.scratch) {
             if opts.reject {
                 self.taken.remove(&(x, y));
@@ -1151,7 +1140,6 @@ fn fill_bands(
     src: &dyn Source,
     lat: &Lattice,
     opts: &SampleOptions,
-    _size: (usize, usize),
     report: &mut SampleReport,
     positions: &mut Vec<(usize, usize)>,
     values: &mut Vec<[f32; 3]>,

@@ -354,12 +354,15 @@ fn decode_oriented(f: &EncodedFrame, input: &Input) -> Option<Decoded> {
 }
 
 /// How many frames are decoded at once: one per thread of the pool.
+#[cfg(feature = "parallel")]
 fn group_size() -> usize {
-    #[cfg(feature = "parallel")]
-    let group = rayon::current_num_threads().max(1);
-    #[cfg(not(feature = "parallel"))]
-    let group = 1;
-    group
+    rayon::current_num_threads().max(1)
+}
+
+/// How many frames are decoded at once: one without the `parallel` feature.
+#[cfg(not(feature = "parallel"))]
+fn group_size() -> usize {
+    1
 }
 
 /// `f` on every item, in parallel with the `parallel` feature, results in order.
