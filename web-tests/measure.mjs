@@ -2,7 +2,7 @@
 // Chromium: the time in the core (worker), the wall time from picking the photos to the
 // preview, the tab's peak memory (renderer process resident set, sampled every 100 ms; the
 // worker runs in the same process), the wasm linear memory's high-water mark, and the native
-// CLI's time for the same frames and options. Also the gzipped .wasm size.
+// CLI's time for the same frames and options (and its stage times). Also the gzipped .wasm size.
 //   node measure.mjs [--size 3464] [--evs -2,0,2] [--threads N] [--out results.json]
 // --evs gives the frames' exposure values (`skydome synth --evs`): -4,-3,-2,-1,0,1,2,3,4 is a
 // phone's 9-frame bracket.
@@ -10,7 +10,7 @@
 // page is cross-origin isolated by `skydome serve`), 0 the single-threaded core; without it the
 // app picks (one thread per core).
 // Speed is measured here, never asserted in tests.
-import { execFileSync } from 'node:child_process';
+import { execFileSync, spawnSync } from 'node:child_process';
 import { existsSync, readFileSync, readdirSync, writeFileSync } from 'node:fs';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -81,9 +81,14 @@ const frames = readdirSync(dir).filter((f) => /^frame_\d+\.jpg$/.test(f)).sort()
 const cliArgs = ['merge', ...frames, '--times-file', path.join(dir, 'times.txt'), '--fisheye',
   '--lens-model', 'stereographic', '--fov', '235', '--crop', '--north', '0', '--sun', 'auto',
   '--preview', path.join(dir, 'cli.jpg'), '-o', path.join(dir, 'cli.hdr'), '--quiet', '--force'];
+// SKYDOME_TIMINGS=1: the CLI prints its own stage times on stderr (`timings: decoding 0.123 s,
+// …, writing 0.045 s`), compared stage by stage with the browser's.
 const c0 = performance.now();
-execFileSync(cliBin, cliArgs);
+const cliRun = spawnSync(cliBin, cliArgs, { env: { ...process.env, SKYDOME_TIMINGS: '1' }, encoding: 'utf8' });
 const cliMs = performance.now() - c0;
+if (cliRun.status !== 0) throw new Error(`skydome merge failed: ${cliRun.stderr}`);
+const cliStages = Object.fromEntries([...(cliRun.stderr.match(/^timings: (.*)$/m) || [null, ''])[1]
+  .matchAll(/(\w+) ([\d.]+) s/g)].map((m) => [m[1], Number(m[2])]));
 
 const server = await serve();
 const p = await phone(server.origin);
@@ -134,6 +139,7 @@ try {
     browser_wall_s: wallMs / 1000,
     browser_stage_s: Object.fromEntries(Object.entries(stages).map(([k, v]) => [k, v / 1000])),
     cli_s: cliMs / 1000,
+    cli_stage_s: cliStages,
     cli_binary: cliBin,
     tab_peak_rss_mb: peak.rss / 2 ** 20,
     tab_peak_own_mb: peak.anon / 2 ** 20,

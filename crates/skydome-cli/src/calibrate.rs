@@ -41,9 +41,16 @@ pub struct CalibArgs {
     /// Smoothness weight λ of the second-derivative term (default 30; 100 with --method noise).
     #[arg(long)]
     pub lambda: Option<f64>,
+    /// Move the hat weight's ends in by this many codes: codes within it of 0 and 255 get no
+    /// weight (default 0, the seed's hat; 2.55 is colour-hdri's). Not with --method seed.
+    #[arg(long, value_name = "CODES")]
+    pub hat_margin: Option<f64>,
     /// `robust` rejects clipped, edge and non-monotonic samples and raises N; `noise` is robust
     /// with 2000 samples stratified over the middle frame's codes and the noise-weighted fit
-    /// (λ 100); `seed` is the original method exactly (random pixels per cell, no rejection).
+    /// (λ 100); `colour-hdri` is colour-hdri's Debevec calibration (1000 histogram samples,
+    /// Grossberg & Nayar: no alignment needed, but noisy frames bend the curve — see
+    /// docs/accuracy.md; λ 30, its hat); `seed` is the original method exactly (random pixels
+    /// per cell, no rejection).
     #[arg(long, value_enum, default_value_t = Method::Robust)]
     pub method: Method,
     /// Least-squares solver: `schur` (fast, default) or `svd` (the seed's dense SVD, slow).
@@ -61,6 +68,8 @@ pub enum Method {
     Robust,
     /// Robust, stratified, 2000 samples, the noise-weighted fit.
     Noise,
+    /// colour-hdri's calibration: histogram samples, λ 30, its hat.
+    ColourHdri,
     /// The seed's method exactly.
     Seed,
 }
@@ -101,10 +110,24 @@ impl CalibArgs {
             lambda: self.lambda.unwrap_or(base.lambda),
             solver: self.solver,
             fit: self.fit.unwrap_or(base.fit),
+            hat_margin: self.hat_margin.unwrap_or(base.hat_margin),
         };
         match self.method {
             Method::Robust => robust(CalibrateOptions::default()),
             Method::Noise => robust(CalibrateOptions::noise_fit()),
+            Method::ColourHdri => {
+                let base = CalibrateOptions::colour_hdri();
+                CalibrateOptions {
+                    sampling: SampleOptions {
+                        samples: self.samples.unwrap_or(base.sampling.samples),
+                        ..base.sampling.clone()
+                    },
+                    lambda: self.lambda.unwrap_or(base.lambda),
+                    solver: self.solver,
+                    hat_margin: self.hat_margin.unwrap_or(base.hat_margin),
+                    ..base
+                }
+            }
             Method::Seed => CalibrateOptions::seed_method(
                 self.samples.unwrap_or(GRID_METHOD_SAMPLES),
                 self.grid,
@@ -263,10 +286,17 @@ fn print_report(r: &Report) {
         } else {
             String::new()
         };
-        crate::out(&format!(
-            "samples: {} used of target {}{raised}; rejected {} clipped, {} edge, {} non-monotonic; grid {}x{}, seed {}",
-            s.used, s.target, s.rejected_clipped, s.rejected_edge, s.rejected_non_monotonic, s.grid, s.grid, s.seed
-        ));
+        if s.histogram {
+            crate::out(&format!(
+                "samples: {} matched by rank in the frames' histograms (Grossberg & Nayar; no pixel positions, nothing rejected)",
+                s.used
+            ));
+        } else {
+            crate::out(&format!(
+                "samples: {} used of target {}{raised}; rejected {} clipped, {} edge, {} non-monotonic; grid {}x{}, seed {}",
+                s.used, s.target, s.rejected_clipped, s.rejected_edge, s.rejected_non_monotonic, s.grid, s.grid, s.seed
+            ));
+        }
         let cr = s.code_range;
         crate::out(&format!(
             "codes constrained by data: R {}..{}, G {}..{}, B {}..{} ({} samples added to fill code bands); outside them the curve is extrapolated",

@@ -107,22 +107,36 @@ pub fn hint(e: PipelineError) -> anyhow::Error {
 }
 
 /// One progress bar on stderr driven by the pipeline's stage events (hidden when quiet or
-/// when stderr is not a terminal).
+/// when stderr is not a terminal). With `SKYDOME_TIMINGS=1` in the environment it also times
+/// each stage (from its first event to the next stage's) and [`StageBar::timings`] prints them
+/// on stderr, quiet or not: the native side of `web-tests/measure.mjs`'s stage table.
 pub struct StageBar {
     bar: ProgressBar,
     stage: Option<pipeline::Stage>,
+    /// Seconds spent in each stage so far, in order, when timing.
+    timings: Option<Vec<(&'static str, f64)>>,
+    since: std::time::Instant,
 }
 
 impl StageBar {
     /// A bar, hidden when `quiet`.
     pub fn new(quiet: bool) -> Self {
         let bar = progress(quiet, 100, "");
-        Self { bar, stage: None }
+        let timings = std::env::var_os("SKYDOME_TIMINGS")
+            .is_some_and(|v| !v.is_empty() && v != "0")
+            .then(Vec::new);
+        Self {
+            bar,
+            stage: None,
+            timings,
+            since: std::time::Instant::now(),
+        }
     }
 
     /// Shows an event; never cancels (Ctrl-C ends the process).
     pub fn show(&mut self, p: &pipeline::Progress) -> std::ops::ControlFlow<()> {
         if self.stage != Some(p.stage) {
+            self.lap();
             self.stage = Some(p.stage);
             self.bar.set_message(p.stage.name());
         }
@@ -131,9 +145,38 @@ impl StageBar {
         std::ops::ControlFlow::Continue(())
     }
 
-    /// Removes the bar.
-    pub fn finish(self) {
+    /// Ends the current stage's lap (when timing) and starts the next one.
+    fn lap(&mut self) {
+        let now = std::time::Instant::now();
+        if let (Some(t), Some(stage)) = (self.timings.as_mut(), self.stage) {
+            let s = now.duration_since(self.since).as_secs_f64();
+            match t.iter_mut().find(|(n, _)| *n == stage.name()) {
+                Some((_, sum)) => *sum += s,
+                None => t.push((stage.name(), s)),
+            }
+        }
+        self.since = now;
+    }
+
+    /// Removes the bar and ends the last stage's lap.
+    pub fn finish(&mut self) {
+        self.lap();
+        self.stage = None;
         self.bar.finish_and_clear();
+    }
+
+    /// Prints the stage times and `extra` (name, seconds) on stderr as one line
+    /// (`timings: decoding 0.123 s, lens 0.045 s, …`) when `SKYDOME_TIMINGS` is set.
+    pub fn timings(&self, extra: &[(&str, f64)]) {
+        if let Some(t) = &self.timings {
+            let parts: Vec<String> = t
+                .iter()
+                .map(|(n, s)| (*n, *s))
+                .chain(extra.iter().copied())
+                .map(|(n, s)| format!("{n} {s:.3} s"))
+                .collect();
+            eprintln!("timings: {}", parts.join(", "));
+        }
     }
 }
 

@@ -201,6 +201,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     let mut bar = io::StageBar::new(quiet);
     let mut dome = pipeline::run(input, &options, &mut |p| bar.show(p)).map_err(io::hint)?;
     bar.finish();
+    let writing = std::time::Instant::now();
     if let Some(p) = &a.run.profile {
         dome.report.response = format!("profile {}", p.display());
     }
@@ -212,6 +213,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         outputs.add(p, profile_to_save(&a, &dome)?.to_json().into_bytes());
     }
     let written = outputs.commit(&inputs, a.force)?;
+    bar.timings(&[("writing", writing.elapsed().as_secs_f64())]);
     let written: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     if a.json {
         let s = Summary {

@@ -251,6 +251,7 @@ pub fn calibrate(
             .parse()
             .map_err(|e: skydome::UnknownName| value_error("solver", e))?,
         fit,
+        hat_margin: 0.0,
     };
     let circle = match circle {
         Some((cx, cy, r)) if cx.is_finite() && cy.is_finite() && r.is_finite() && r > 0.0 => {

@@ -56,16 +56,29 @@ pub(crate) fn log2(x: f32) -> f32 {
 /// below 3·10⁻⁷; NaN stays NaN.
 #[inline(always)]
 pub fn exp2(x: f32) -> f32 {
-    const MAGIC: f32 = 12_582_912.0; // 1.5 · 2²³: adding it rounds to an integer in the low bits
-    let x = x.clamp(-126.0, 126.0);
-    let t = x + MAGIC;
-    let k = t.to_bits() as i32 - 0x4B40_0000;
-    let f = x - (t - MAGIC);
-    let p = 1.000_000_1
-        + f * (0.693_146_94
-            + f * (0.240_221_2 + f * (0.055_507_13 + f * (0.009_675_542 + f * 0.001_327_647_2))));
+    let x = x.clamp(-EXP2_LIMIT, EXP2_LIMIT);
+    let t = x + EXP2_MAGIC;
+    let k = t.to_bits() as i32 - EXP2_MAGIC.to_bits() as i32;
+    let f = x - (t - EXP2_MAGIC);
+    let [c0, c1, c2, c3, c4, c5] = EXP2_C;
+    let p = c0 + f * (c1 + f * (c2 + f * (c3 + f * (c4 + f * c5))));
     p * f32::from_bits(((k + 127) as u32) << 23)
 }
+
+/// [`exp2`]'s clamp of its argument.
+pub(crate) const EXP2_LIMIT: f32 = 126.0;
+/// [`exp2`]'s rounding constant, 1.5 · 2²³: adding it rounds to an integer in the low bits.
+pub(crate) const EXP2_MAGIC: f32 = 12_582_912.0;
+/// [`exp2`]'s polynomial `2ᶠ ≈ Σ c_i fⁱ` on `[−½, ½]` (the merge's vector kernel evaluates the
+/// same operations in the same order, so both give the same bits).
+pub(crate) const EXP2_C: [f32; 6] = [
+    1.000_000_1,
+    0.693_146_94,
+    0.240_221_2,
+    0.055_507_13,
+    0.009_675_542,
+    0.001_327_647_2,
+];
 
 #[cfg(test)]
 mod tests {

@@ -64,6 +64,10 @@
 //! The crate has no command-line or filesystem-walking dependencies and builds for
 //! `wasm32-unknown-unknown`.
 
+// The one `unsafe` block set is the noise merge's AVX2 kernel (merge/fused.rs), allowed there
+// alone, with a SAFETY comment at each use.
+#![deny(unsafe_code)]
+
 pub mod align;
 pub mod batch;
 pub mod bracket;

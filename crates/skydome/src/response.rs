@@ -136,6 +136,15 @@ pub fn hat_f(z: f64) -> f64 {
     z.min(255.0 - z).max(0.0)
 }
 
+/// Debevec & Malik's hat with its ends moved in by `margin` codes:
+/// `max(0, min(z, 255 − z) − margin)`. `margin = 0` is [`hat_f`] (the seed's hat, `Z_min = 0`,
+/// `Z_max = 255`); colour-hdri's `weighting_function_Debevec1997` (domain `[0.01, 0.99]` of
+/// `z / 255`) is `margin = 2.55` up to a constant factor, which does not change the solve.
+#[inline]
+pub fn hat_margin(z: f64, margin: f64) -> f64 {
+    (z.min(255.0 - z) - margin).max(0.0)
+}
+
 /// A data row's entries of `g` for a continuous code: `z` is split between `⌊z⌋` and `⌊z⌋ + 1`
 /// by linear interpolation; returns `(z0, 1 − f, f)`.
 #[inline]
@@ -268,6 +277,16 @@ pub struct CalibrateOptions {
     /// How the data rows are weighted.
     #[serde(default)]
     pub fit: Fit,
+    /// Codes by which the hat's ends move in ([`hat_margin`]; `0..127`, default 0, the seed's
+    /// hat). colour-hdri's hat is 2.55: codes 0–2 and 253–255 then get no weight in the data
+    /// or smoothness rows (the curve there is the linear continuation of its neighbours).
+    /// Used by the hat fit.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub hat_margin: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl Default for CalibrateOptions {
@@ -278,6 +297,7 @@ impl Default for CalibrateOptions {
             lambda: SEED_LAMBDA,
             solver: Solver::Schur,
             fit: Fit::Hat,
+            hat_margin: 0.0,
         }
     }
 }
@@ -292,6 +312,7 @@ impl CalibrateOptions {
             lambda: NOISE_FIT_LAMBDA,
             solver: Solver::Schur,
             fit: Fit::Noise,
+            hat_margin: 0.0,
         }
     }
 
@@ -309,9 +330,28 @@ impl CalibrateOptions {
             lambda,
             solver,
             fit: Fit::Hat,
+            hat_margin: 0.0,
+        }
+    }
+
+    /// colour-hdri's `camera_response_functions_Debevec1997` with its defaults: 1000
+    /// histogram samples ([`SampleOptions::histogram_method`]), λ = 30 and its hat
+    /// ([`hat_margin`] 2.55).
+    pub fn colour_hdri() -> Self {
+        Self {
+            sampling: SampleOptions::histogram_method(COLOUR_HDRI_SAMPLES),
+            lambda: SEED_LAMBDA,
+            solver: Solver::Schur,
+            fit: Fit::Hat,
+            hat_margin: COLOUR_HDRI_HAT_MARGIN,
         }
     }
 }
+
+/// Samples of colour-hdri's histogram sampling (`samples_Grossberg2003`).
+pub const COLOUR_HDRI_SAMPLES: usize = 1000;
+/// colour-hdri's hat in codes: its domain `[0.01, 0.99]` of `z / 255`.
+pub const COLOUR_HDRI_HAT_MARGIN: f64 = 2.55;
 
 /// A calibration result.
 #[derive(Debug, Clone, PartialEq)]
@@ -342,9 +382,9 @@ impl Calibration {
     /// weight, `x = ln E_i + ln Δt_j` (log exposure) and `y = Z_ij` (code). Returns `(x, y)`.
     pub fn plot_points(&self, c: usize) -> (Vec<f64>, Vec<f64>) {
         let s = &self.samples;
-        let mut xs = Vec::with_capacity(s.positions.len() * s.frames);
+        let mut xs = Vec::with_capacity(s.count() * s.frames);
         let mut ys = Vec::with_capacity(xs.capacity());
-        for i in 0..s.positions.len() {
+        for i in 0..s.count() {
             for j in 0..s.frames {
                 let z = s.z(i, j, c);
                 if hat_f(z as f64) > 0.0 {
@@ -388,7 +428,7 @@ pub fn calibrate(
     let lt = log_times(frames)?;
     check_lambda(opts.lambda)?;
     let samples = sample(frames, circle, &opts.sampling)?;
-    if samples.positions.is_empty() {
+    if samples.count() == 0 {
         let r = &samples.report;
         return Err(ResponseError::NoSamples {
             clipped: r.rejected_clipped,
@@ -396,7 +436,7 @@ pub fn calibrate(
             non_monotonic: r.rejected_non_monotonic,
         });
     }
-    calibrate_samples_fit(samples, &lt, opts.lambda, opts.solver, opts.fit)
+    calibrate_samples_with(samples, &lt, opts)
 }
 
 /// [`calibrate`] with the samples drawn already (by [`crate::sampling::sample_from`] on what
@@ -441,6 +481,22 @@ pub fn calibrate_samples(
     calibrate_samples_fit(samples, log_times, lambda, solver, Fit::Hat)
 }
 
+/// Solves all three channels from given samples and `ln Δt_j` as `opts` says (its λ, solver,
+/// fit and hat margin; its sampling is not used).
+pub fn calibrate_samples_with(
+    samples: Samples,
+    log_times: &[f64],
+    opts: &CalibrateOptions,
+) -> Result<Calibration, ResponseError> {
+    let m = opts.hat_margin;
+    if !(m.is_finite() && (0.0..127.0).contains(&m)) {
+        return Err(ResponseError::BadOption(format!(
+            "hat margin = {m} (use 0 up to 127 codes; colour-hdri's hat is 2.55)"
+        )));
+    }
+    solve_all(samples, log_times, opts.lambda, opts.solver, opts.fit, m)
+}
+
 /// Solves all three channels from given samples and `ln Δt_j` with the given fit.
 pub fn calibrate_samples_fit(
     samples: Samples,
@@ -449,14 +505,26 @@ pub fn calibrate_samples_fit(
     solver: Solver,
     fit: Fit,
 ) -> Result<Calibration, ResponseError> {
+    solve_all(samples, log_times, lambda, solver, fit, 0.0)
+}
+
+/// [`calibrate_samples_fit`] with the hat's ends moved in by `margin` codes ([`hat_margin`]).
+fn solve_all(
+    samples: Samples,
+    log_times: &[f64],
+    lambda: f64,
+    solver: Solver,
+    fit: Fit,
+    margin: f64,
+) -> Result<Calibration, ResponseError> {
     check_lambda(lambda)?;
     if log_times.len() != samples.frames || samples.frames < 2 {
         return Err(ResponseError::TooFewFrames(samples.frames));
     }
     let solve = |c: usize| {
         let once = |w: Option<&[f64]>| match solver {
-            Solver::Schur => solve_schur_weighted(&samples, log_times, lambda, c, w),
-            Solver::DenseSvd => solve_dense_svd_weighted(&samples, log_times, lambda, c, w),
+            Solver::Schur => solve_schur_weighted(&samples, log_times, lambda, c, w, margin),
+            Solver::DenseSvd => solve_dense_svd_weighted(&samples, log_times, lambda, c, w, margin),
         };
         let mut x = once(None)?;
         if fit == Fit::Noise {
@@ -536,7 +604,7 @@ const NOISE_CEILING: f64 = 3.0;
 /// observations, which keeps λ's meaning.
 fn noise_weights(samples: &Samples, lt: &[f64], c: usize, g: &[f64], e: &[f64]) -> Vec<f64> {
     let p = samples.frames;
-    let n = samples.positions.len();
+    let n = samples.count();
     let nb = LEVELS.div_ceil(NOISE_BAND);
     let g_at = |z: f32| {
         let (z0, f0, f1) = split(z);
@@ -640,13 +708,24 @@ fn make_monotonic(g: &[f64]) -> (Vec<f64>, usize) {
     (m, n)
 }
 
-fn hat_table() -> [f64; LEVELS] {
+/// The smoothness rows' weights: the hat ([`hat`] when `margin` is 0, else [`hat_margin`]).
+/// Where a margin zeroes the hat, a weight of [`END_SMOOTHNESS`] keeps those codes of `g` tied
+/// to their neighbours (no data row sees them, so without it the system is singular).
+fn hat_table(margin: f64) -> [f64; LEVELS] {
     let mut w = [0.0; LEVELS];
     for (z, v) in w.iter_mut().enumerate() {
-        *v = hat(z as u8);
+        *v = if margin == 0.0 {
+            hat(z as u8)
+        } else {
+            hat_margin(z as f64, margin).max(END_SMOOTHNESS)
+        };
     }
     w
 }
+
+/// The smallest smoothness weight with a hat margin (see [`hat_table`]): small beside the
+/// hat's 1–127, so the measured part of the curve does not feel it.
+const END_SMOOTHNESS: f64 = 1e-3;
 
 /// Lower-triangular Cholesky factor of a row-major `n × n` SPD matrix, in place (the upper
 /// triangle is left as it was and never read again).
@@ -728,14 +807,14 @@ struct Row {
 }
 
 /// The data rows of channel `c`; each observation's weight is `weights[i·P + j]` when given,
-/// else the hat at its code.
-fn rows_of(samples: &Samples, c: usize, weights: Option<&[f64]>) -> Vec<Row> {
+/// else the hat (with its ends moved in by `margin`) at its code.
+fn rows_of(samples: &Samples, c: usize, weights: Option<&[f64]>, margin: f64) -> Vec<Row> {
     let p = samples.frames;
-    let mut rows = Vec::with_capacity(samples.positions.len() * p);
-    for i in 0..samples.positions.len() {
+    let mut rows = Vec::with_capacity(samples.count() * p);
+    for i in 0..samples.count() {
         for j in 0..p {
             let z = samples.z(i, j, c);
-            let w = weights.map_or_else(|| hat_f(z as f64), |w| w[i * p + j]);
+            let w = weights.map_or_else(|| hat_margin(z as f64, margin), |w| w[i * p + j]);
             let (z0, f0, f1) = split(z);
             rows.push(Row {
                 z0,
@@ -768,10 +847,11 @@ impl<'a> Schur<'a> {
         lambda: f64,
         c: usize,
         weights: Option<&[f64]>,
+        margin: f64,
     ) -> Result<Self, ResponseError> {
-        let w = hat_table();
+        let w = hat_table(margin);
         let p = samples.frames;
-        let rows = rows_of(samples, c, weights);
+        let rows = rows_of(samples, c, weights, margin);
         let mut s = vec![0.0; LEVELS * LEVELS];
         for z in 1..LEVELS - 1 {
             let a = lambda * w[z];
@@ -784,7 +864,7 @@ impl<'a> Schur<'a> {
         }
         let gw = gauge_weight(lambda);
         s[GAUGE * LEVELS + GAUGE] += gw * gw;
-        let mut d = Vec::with_capacity(samples.positions.len());
+        let mut d = Vec::with_capacity(samples.count());
         // `u` collects the sample's column of A_gE (entries −a·w) as (z, a·w) pairs.
         let mut u: Vec<(usize, f64)> = Vec::with_capacity(2 * p);
         for sample_rows in rows.chunks_exact(p) {
@@ -909,7 +989,7 @@ pub fn solve_schur(
     lambda: f64,
     channel: usize,
 ) -> Result<(Vec<f64>, Vec<f64>), ResponseError> {
-    solve_schur_weighted(samples, log_times, lambda, channel, None)
+    solve_schur_weighted(samples, log_times, lambda, channel, None, 0.0)
 }
 
 /// [`solve_schur`] with each observation's data-row weight given (`weights[i·P + j]`, ≥ 0)
@@ -920,10 +1000,11 @@ fn solve_schur_weighted(
     lambda: f64,
     channel: usize,
     weights: Option<&[f64]>,
+    margin: f64,
 ) -> Result<(Vec<f64>, Vec<f64>), ResponseError> {
     check_inputs(samples, log_times, lambda, channel)?;
-    let sys = Schur::new(samples, log_times, lambda, channel, weights)?;
-    let n = samples.positions.len();
+    let sys = Schur::new(samples, log_times, lambda, channel, weights, margin)?;
+    let n = samples.count();
     let (rg, re) = sys.normal_residual(&vec![0.0; LEVELS], &vec![0.0; n]);
     let (mut g, mut e) = sys.solve(rg, &re);
     // Refinement on the full least-squares residual (CSNE): each step gains roughly the
@@ -963,7 +1044,10 @@ fn check_inputs(
     if samples.frames < 2 || log_times.len() != samples.frames {
         return Err(ResponseError::TooFewFrames(log_times.len()));
     }
-    if samples.values.len() != samples.positions.len() * samples.frames {
+    // Positions, when there are any (histogram samples have none), must match the values.
+    let positioned = samples.positions.is_empty()
+        || samples.values.len() == samples.positions.len() * samples.frames;
+    if !samples.values.len().is_multiple_of(samples.frames) || !positioned {
         return Err(ResponseError::BadOption(
             "samples.values must hold one RGB value per sample and frame".into(),
         ));
@@ -985,7 +1069,7 @@ pub fn solve_dense_svd(
     lambda: f64,
     channel: usize,
 ) -> Result<(Vec<f64>, Vec<f64>), ResponseError> {
-    solve_dense_svd_weighted(samples, log_times, lambda, channel, None)
+    solve_dense_svd_weighted(samples, log_times, lambda, channel, None, 0.0)
 }
 
 /// [`solve_dense_svd`] with given data-row weights (see [`solve_schur_weighted`]).
@@ -995,11 +1079,12 @@ fn solve_dense_svd_weighted(
     lambda: f64,
     channel: usize,
     weights: Option<&[f64]>,
+    margin: f64,
 ) -> Result<(Vec<f64>, Vec<f64>), ResponseError> {
     check_inputs(samples, log_times, lambda, channel)?;
-    let n = samples.positions.len();
+    let n = samples.count();
     let p = samples.frames;
-    let w = hat_table();
+    let w = hat_table(margin);
     let rows = n * p + (LEVELS - 2) + 1;
     let cols = LEVELS + n;
     let mut a = nalgebra::DMatrix::<f64>::zeros(rows, cols);
@@ -1008,7 +1093,7 @@ fn solve_dense_svd_weighted(
     for i in 0..n {
         for (j, &lt) in log_times.iter().enumerate() {
             let z = samples.z(i, j, channel);
-            let wz = weights.map_or_else(|| hat_f(z as f64), |w| w[i * p + j]);
+            let wz = weights.map_or_else(|| hat_margin(z as f64, margin), |w| w[i * p + j]);
             let (z0, f0, f1) = split(z);
             a[(k, z0)] += wz * f0;
             if f1 != 0.0 {

@@ -73,10 +73,10 @@ pub fn crop_dome_from(
     };
     let mut out = HdrImage::new(n, n);
     let r2 = r * r;
-    for (y, row) in out.data.chunks_exact_mut(3 * n).enumerate() {
+    let copy_row = |(y, row): (usize, &mut [f32])| {
         let sy = oy + y as i64 - origin.1;
         if sy < 0 || sy >= img.height as i64 {
-            continue;
+            return;
         }
         let dy = y as f64 + 0.5 - horizon.cy;
         let src_row = &img.data[3 * sy as usize * img.width..3 * (sy as usize + 1) * img.width];
@@ -89,7 +89,21 @@ pub fn crop_dome_from(
             let s = 3 * sx as usize;
             row[3 * x..3 * x + 3].copy_from_slice(&src_row[s..s + 3]);
         }
+    };
+    // Rows in parallel with the `parallel` feature.
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        out.data
+            .par_chunks_exact_mut(3 * n.max(1))
+            .enumerate()
+            .for_each(copy_row);
     }
+    #[cfg(not(feature = "parallel"))]
+    out.data
+        .chunks_exact_mut(3 * n.max(1))
+        .enumerate()
+        .for_each(copy_row);
     Ok(DomeCrop {
         image: out,
         horizon,

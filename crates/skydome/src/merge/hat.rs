@@ -6,9 +6,9 @@ use super::{code_tables, fast_exp2, Code, Frame, Weighting};
 use super::{BLACK, CLIPPED_HIGH, CLIPPED_LOW, RELEASE_BANDS, ROWS_PER_BAND};
 
 /// Peak of the 8-bit hat: the full weight.
-const W_MAX: f32 = 127.0;
+pub(super) const W_MAX: f32 = 127.0;
 /// Floor weight of the shortest frame: keeps `Σ w > 0` without moving any real result.
-const W_FLOOR: f32 = 1e-6;
+pub(super) const W_FLOOR: f32 = 1e-6;
 
 #[inline]
 pub(super) fn hat_f(z: f32) -> f32 {
@@ -59,6 +59,11 @@ impl<const N: usize> Tables<N> {
             [w, w * vote]
         });
         Self { flat }
+    }
+
+    /// Frame `j`'s entry `[w, w · log2 E_j]` for channel `c` and code `z`.
+    pub(super) fn entry(&self, j: usize, c: usize, z: usize) -> [f32; 2] {
+        self.flat[(j * 3 + c) * N + z]
     }
 
     /// The tables of frames `j0 .. j0 + G`, per channel.
@@ -308,34 +313,42 @@ fn merge_band<T: Code, const N: usize>(
     let mut hs = vec![0u32; if conf.is_empty() { 0 } else { row }];
     let mut ext = vec![0u8; row];
     let mut rows: Vec<&[T]> = Vec::with_capacity(srcs.len());
+    let mut tails: Vec<&[T]> = Vec::with_capacity(srcs.len());
     let mut scratch = Scratch::default();
     let (mut high, mut low, mut blk) = (0usize, 0usize, 0usize);
     for (r, orow) in out.chunks_mut(row).enumerate() {
         let start = off + r * row;
         rows.clear();
         rows.extend(srcs.iter().map(|s| &s[start..start + row]));
-        if rows.len() <= GROUP {
-            accumulate_group::<T, N, ONLY>(&rows, luts, 0, orow, &mut []);
+        // The noise-aware merge's vector kernel takes what it can of the row (whole steps of
+        // eight pixels), the scalar passes below the rest, with the same bits.
+        let done = refine.map_or(0, |r| T::fused_row(&rows, r, orow));
+        tails.clear();
+        tails.extend(rows.iter().map(|s| &s[done..]));
+        let dn = done.min(den.len());
+        let (orest, drest) = (&mut orow[done..], &mut den[dn..]);
+        if tails.len() <= GROUP {
+            accumulate_group::<T, N, ONLY>(&tails, luts, 0, orest, &mut []);
         } else {
-            for (k, fs) in rows.chunks(GROUP).enumerate() {
+            for (k, fs) in tails.chunks(GROUP).enumerate() {
                 if k == 0 {
-                    accumulate_group::<T, N, FIRST>(fs, luts, 0, orow, &mut den);
+                    accumulate_group::<T, N, FIRST>(fs, luts, 0, orest, drest);
                 } else {
-                    accumulate_group::<T, N, LATER>(fs, luts, k * GROUP, orow, &mut den);
+                    accumulate_group::<T, N, LATER>(fs, luts, k * GROUP, orest, drest);
                 }
             }
         }
         match refine {
             // The noise-aware merge refines the hat's `log2 E₀` while the row is in cache.
             Some(r) => {
-                if !den.is_empty() {
-                    for (o, &d) in orow.iter_mut().zip(&den) {
+                if !drest.is_empty() {
+                    for (o, &d) in orest.iter_mut().zip(drest.iter()) {
                         *o /= d;
                     }
                 }
-                refine_row(&rows, r, &mut scratch, orow);
+                refine_row(&tails, r, &mut scratch, orest);
             }
-            None => finish_row(orow, &den),
+            None => finish_row(orest, drest),
         }
 
         // Clipped pixels: some channel is black or full scale in every frame. Branch-free byte

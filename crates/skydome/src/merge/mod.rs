@@ -52,6 +52,8 @@
 
 mod consistency;
 mod flags;
+#[allow(unsafe_code)] // std::arch gathers, loads and stores; see the module's SAFETY notes.
+mod fused;
 mod hat;
 mod linear;
 mod refine;
@@ -461,13 +463,11 @@ fn merge_codes<T: Code, const N: usize>(
     let black = T::black(opts.black_level);
     // The noise-aware merge refines each row right after the hat has merged it (one pass).
     let refine = match (opts.weighting, &noise_est) {
-        (Weighting::Noise, Some(e)) => Some(Refine::<N>::new(
-            lt,
-            response,
-            &e.model,
-            opts.black_level,
-            g,
-        )),
+        (Weighting::Noise, Some(e)) => {
+            let mut r = Refine::<N>::new(lt, response, &e.model, opts.black_level, g);
+            r.fused = fused::Fused::new(&r, |j, c, z| luts.entry(j, c, z), opts.black_level);
+            Some(r)
+        }
         _ => None,
     };
     let (data, conf, clip) = outputs(out, opts, w, h);
@@ -595,6 +595,9 @@ trait Code: Copy + Sync + PartialOrd {
     /// The black level, given as an 8-bit code, in this type's units: the highest value that
     /// bins to an 8-bit code at or below it.
     fn black(level: u8) -> Self;
+    /// Merges what the noise-aware merge's vector kernel can of one row (see
+    /// [`fused::Fused::row`]); returns how many samples that was, from the row's start.
+    fn fused_row<const N: usize>(rows: &[&[Self]], r: &Refine<N>, out: &mut [f32]) -> usize;
 }
 
 impl Code for u8 {
@@ -620,6 +623,9 @@ impl Code for u8 {
     }
     fn black(level: u8) -> Self {
         level
+    }
+    fn fused_row<const N: usize>(rows: &[&[Self]], r: &Refine<N>, out: &mut [f32]) -> usize {
+        r.fused.as_ref().map_or(0, |f| f.row(rows, out))
     }
 }
 
@@ -650,6 +656,10 @@ impl Code for u16 {
             0 => 0,
             b => (b as u32 * 257 + 128).min(65535) as u16,
         }
+    }
+    fn fused_row<const N: usize>(_: &[&[Self]], _: &Refine<N>, _: &mut [f32]) -> usize {
+        // The kernel is for 8-bit codes (its tables would not stay in cache at 16 bits).
+        0
     }
 }
 

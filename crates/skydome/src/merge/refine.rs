@@ -2,12 +2,13 @@
 //! which re-weights every vote by the noise of the code its frame was expected to read.
 
 use super::consistency::LOWER_BOUND_CODE;
+use super::fused::Fused;
 use super::{code_tables, fast_exp2, Code};
 use crate::noise::{self, NoiseModel};
 use crate::response::{Response, LEVELS};
 
 /// Bins per stop of the hat's estimate `log2 E₀` in the weight rows of [`Refine`].
-const BINS_PER_STOP: f32 = 32.0;
+pub(super) const BINS_PER_STOP: f32 = 32.0;
 
 /// The second estimate of the noise-aware merge ([`Weighting::Noise`](super::Weighting::Noise)).
 ///
@@ -28,19 +29,22 @@ const BINS_PER_STOP: f32 = 32.0;
 /// then costs one bin index (vector arithmetic) and one row, whatever the frame count.
 pub(super) struct Refine<const N: usize> {
     /// Frame-major, then channel, then code: `[log2 E_j, observed-code factor]`.
-    votes: Vec<[f32; 2]>,
+    pub(super) votes: Vec<[f32; 2]>,
     /// The three channels' weight rows, one channel after the other: channel `c`'s row `b`,
     /// the `start[c] + b`-th row of `frames` values, holds each frame's weight for `log2 E₀` in bin `b`, that is
     /// `⌊log2 E₀ · BINS_PER_STOP − off[c]⌋ = b` (clamped to `0 ..= last[c]`).
-    rows: Vec<f32>,
+    pub(super) rows: Vec<f32>,
     /// Frames per row.
-    frames: usize,
+    pub(super) frames: usize,
     /// Per channel: the bin offset (see `rows`).
-    off: [f32; 3],
+    pub(super) off: [f32; 3],
     /// Per channel: the last bin, as `f32` for clamping.
-    last: [f32; 3],
+    pub(super) last: [f32; 3],
     /// Per channel: its first row's index in `rows` (in rows).
-    start: [i32; 3],
+    pub(super) start: [i32; 3],
+    /// The vector kernel that merges 8-bit rows in one sweep with the same bits, where the CPU
+    /// has one (set by the merge once it has the hat's tables; see [`Fused`]).
+    pub(super) fused: Option<Fused>,
 }
 
 impl<const N: usize> Refine<N> {
@@ -119,6 +123,7 @@ impl<const N: usize> Refine<N> {
             off,
             last,
             start,
+            fused: None,
         }
     }
 }

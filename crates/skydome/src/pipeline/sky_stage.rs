@@ -816,8 +816,8 @@ pub const SUN_PRIOR_RADIUS_DEG: f64 = 12.0;
 fn framed_mask(f: &Framed, mask: &[u8], width: usize, height: usize) -> Vec<bool> {
     let (w, h) = (f.image.width, f.image.height);
     let mut out = vec![false; w * h];
-    for y in 0..h {
-        for x in 0..w {
+    let row = |(y, out): (usize, &mut [bool])| {
+        for (x, o) in out.iter_mut().enumerate() {
             let p = PixelPoint {
                 x: x as f64 + 0.5,
                 y: y as f64 + 0.5,
@@ -828,10 +828,18 @@ fn framed_mask(f: &Framed, mask: &[u8], width: usize, height: usize) -> Vec<bool
             }
             let (ix, iy) = (q.x as usize, q.y as usize);
             if ix < width && iy < height {
-                out[y * w + x] = mask[iy * width + ix] & crate::merge::CLIPPED_HIGH != 0;
+                *o = mask[iy * width + ix] & crate::merge::CLIPPED_HIGH != 0;
             }
         }
+    };
+    // Rows in parallel with the `parallel` feature (a level dome's rows cost trigonometry).
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        out.par_chunks_mut(w.max(1)).enumerate().for_each(row);
     }
+    #[cfg(not(feature = "parallel"))]
+    out.chunks_mut(w.max(1)).enumerate().for_each(row);
     out
 }
 

@@ -72,7 +72,14 @@ pub fn streams(options: &Options) -> bool {
         ),
         AbsoluteMode::Exif => false,
     };
-    plain_crop(options) && !options.align && relative && options.lens != LensSource::None
+    // Histogram samples (`SampleOptions::histogram`) need every pixel of every frame.
+    let histogram =
+        matches!(&options.response, ResponseSource::Calibrate(c) if c.sampling.histogram);
+    plain_crop(options)
+        && !options.align
+        && relative
+        && !histogram
+        && options.lens != LensSource::None
 }
 
 /// One frame decoded and oriented, with its exposure and where it came in the input.

@@ -261,7 +261,7 @@ pub fn find_sun(
     if !(region.r.is_finite() && region.r > 0.0) {
         return Ok(None);
     }
-    let luma: Vec<f32> = img.pixels().map(luminance).collect();
+    let luma = luminance_plane(img);
     let (xs, ys) = region.pixel_bounds(width, height);
     if xs.is_empty() || ys.is_empty() {
         return Ok(None);
@@ -282,20 +282,7 @@ pub fn find_sun(
         }
     };
     let clipped = |i: usize| clues.clipped.is_some_and(|c| c[at(i)]);
-    // The search map: blurred (against noise), but a clipped pixel keeps its own value (a
-    // clipped core of a pixel or two would otherwise be blurred into its aureole).
-    let map: Vec<f32> = (0..bw * bh)
-        .map(|i| match blurred[i].is_nan() {
-            true => f32::NAN,
-            false if clipped(i) => raw(i),
-            false => blurred[i],
-        })
-        .collect();
-    let peak = map
-        .iter()
-        .copied()
-        .filter(|v| !v.is_nan())
-        .fold(0.0f32, f32::max);
+    let (map, peak) = search_map(&luma, width, (x0, y0, bw), &blurred, clues.clipped);
     let bg = background.max(peak * 1e-9).max(f32::MIN_POSITIVE);
     if !(peak > 0.0 && f64::from(peak / bg) >= 2.0) {
         return Ok(None);
@@ -570,6 +557,72 @@ fn close_within(set: &[usize], members: &[usize], bw: usize) -> Vec<usize> {
         .collect()
 }
 
+/// The luminance of every pixel of `img` (row-major), rows in parallel with the `parallel`
+/// feature.
+fn luminance_plane(img: &HdrImage) -> Vec<f32> {
+    let lum = |p: &[f32]| luminance([p[0], p[1], p[2]]);
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        img.data.par_chunks_exact(3).map(lum).collect()
+    }
+    #[cfg(not(feature = "parallel"))]
+    img.data.chunks_exact(3).map(lum).collect()
+}
+
+/// [`find_sun`]'s search map over the box `x0..x0 + bw` of rows `y0..` (`blurred.len() / bw`
+/// of them) of the `width`-wide `luma`: the blurred luminance (against noise), but a pixel
+/// flagged in `clipped` keeps its own (a clipped core of a pixel or two would otherwise be
+/// blurred into its aureole); `NaN` where `blurred` is (outside the region). With the map's
+/// largest value (0 when there is none above 0). Rows in parallel with the `parallel` feature:
+/// both the map and its maximum are the same in any order.
+fn search_map(
+    luma: &[f32],
+    width: usize,
+    (x0, y0, bw): (usize, usize, usize),
+    blurred: &[f32],
+    clipped: Option<&[bool]>,
+) -> (Vec<f32>, f32) {
+    let mut map = vec![0.0f32; blurred.len()];
+    let row = |(y, out): (usize, &mut [f32])| -> f32 {
+        let start = (y0 + y) * width + x0;
+        let src = &luma[start..start + bw];
+        let flags = clipped.map(|c| &c[start..start + bw]);
+        let b = &blurred[y * bw..(y + 1) * bw];
+        let mut peak = 0.0f32;
+        for x in 0..bw {
+            let v = match b[x].is_nan() {
+                true => f32::NAN,
+                false if flags.is_some_and(|f| f[x]) => match src[x].is_finite() {
+                    true => src[x].max(0.0),
+                    false => 0.0,
+                },
+                false => b[x],
+            };
+            out[x] = v;
+            if !v.is_nan() {
+                peak = peak.max(v);
+            }
+        }
+        peak
+    };
+    #[cfg(feature = "parallel")]
+    let peak = {
+        use rayon::prelude::*;
+        map.par_chunks_mut(bw.max(1))
+            .enumerate()
+            .map(row)
+            .reduce(|| 0.0f32, f32::max)
+    };
+    #[cfg(not(feature = "parallel"))]
+    let peak = map
+        .chunks_mut(bw.max(1))
+        .enumerate()
+        .map(row)
+        .fold(0.0f32, f32::max);
+    (map, peak)
+}
+
 /// The median (the `n/2`-th smallest, as `select_nth_unstable`) and the largest of the
 /// non-NaN values (all non-negative and finite here), or `None` for fewer than 16.
 ///
@@ -577,13 +630,34 @@ fn close_within(set: &[usize], members: &[usize], bw: usize) -> Vec<usize> {
 /// non-negative floats the bit patterns sort as the values do, so a histogram of the top 16
 /// bits finds the bin holding the median, and only that bin's values are selected among.
 fn median_and_peak(values: &[f32]) -> Option<(f32, f32)> {
-    let mut hist = vec![0u32; 1 << 16];
-    let (mut n, mut peak) = (0usize, 0.0f32);
-    for &v in values.iter().filter(|v| !v.is_nan()) {
-        hist[(v.to_bits() >> 16) as usize] += 1;
-        n += 1;
-        peak = crate::fastmath::max(v, peak);
-    }
+    // Counts per bin, the number of values and the largest, of one run of values; runs in
+    // parallel with the `parallel` feature (counts add up, the largest is the same in any
+    // order).
+    let count = |part: &[f32]| {
+        let mut hist = vec![0u32; 1 << 16];
+        let (mut n, mut peak) = (0usize, 0.0f32);
+        for &v in part.iter().filter(|v| !v.is_nan()) {
+            hist[(v.to_bits() >> 16) as usize] += 1;
+            n += 1;
+            peak = crate::fastmath::max(v, peak);
+        }
+        (hist, n, peak)
+    };
+    #[cfg(feature = "parallel")]
+    let (hist, n, peak) = {
+        use rayon::prelude::*;
+        // Parts of at least a million values: each part's table is 256 KiB.
+        values
+            .par_chunks(1 << 20)
+            .map(count)
+            .reduce_with(|(mut h, n, p), (h2, n2, p2)| {
+                h.iter_mut().zip(&h2).for_each(|(a, b)| *a += b);
+                (h, n + n2, crate::fastmath::max(p2, p))
+            })
+            .unwrap_or_else(|| count(&[]))
+    };
+    #[cfg(not(feature = "parallel"))]
+    let (hist, n, peak) = count(values);
     if n < 16 {
         return None;
     }
@@ -805,7 +879,8 @@ mod tests {
     #[test]
     fn median_by_histogram_is_the_selected_median() {
         let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        for n in [16usize, 17, 100, 4097, 100_000] {
+        // 2.5 million: three parts of the parallel histogram, added up.
+        for n in [16usize, 17, 100, 4097, 100_000, 2_500_000] {
             for spread in [1.0f32, 1e-3, 1e6] {
                 let v: Vec<f32> = (0..n)
                     .map(|i| {

@@ -32,6 +32,11 @@
 //! the curve is held up by the smoothness term alone (the seed's 100 samples for 3 frames give
 //! only 200). Everything that happened is in [`SampleReport`].
 //!
+//! ## Histogram sampling ([`SampleOptions::histogram_method`])
+//! Grossberg & Nayar's (2003) rank match, colour-hdri's default: sample `i` is, in every
+//! frame, the code at which that frame's cumulative histogram (inside the circle) is nearest
+//! `i / (N − 1)`. No positions, so no alignment is needed; see the `histogram` submodule.
+//!
 //! ## Randomness
 //! [`SplitMix64`] (Steele, Lea & Flood 2014) is written here rather than taken from `rand`
 //! so that a seed gives the same samples on every platform, compiler and crate version,
@@ -47,6 +52,8 @@
 
 use crate::bracket::{Frame, Pixels};
 use crate::image::Circle;
+
+mod histogram;
 
 /// Draws per wanted sample before a cell gives up (the cell may lie outside the circle).
 pub const ATTEMPTS_PER_SAMPLE: usize = 32;
@@ -177,6 +184,13 @@ pub struct SampleOptions {
     /// brightness range its share. [`SampleOptions::grid`] is not used.
     #[serde(default)]
     pub stratify: usize,
+    /// Histogram sampling (Grossberg & Nayar 2003; off by default, on in
+    /// [`SampleOptions::histogram_method`]): `samples` rank-matched samples from each frame's
+    /// cumulative histogram instead of pixel positions (see the module's *Histogram sampling*).
+    /// Needs no alignment, so hand-held brackets and moving clouds do not bend the curve; the
+    /// grid, seed, rejections, patch, code bands and stratification are not used.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub histogram: bool,
 }
 
 /// About how many lattice pixels the stratified draw and the code-band fill consider.
@@ -205,6 +219,7 @@ impl Default for SampleOptions {
             patch: 1,
             code_bands: 16,
             stratify: 0,
+            histogram: false,
         }
     }
 }
@@ -248,6 +263,16 @@ impl SampleOptions {
         Self {
             samples: STRATIFIED_SAMPLES,
             stratify: 32,
+            ..Self::default()
+        }
+    }
+
+    /// Histogram sampling (Grossberg & Nayar 2003) with `samples` rank-matched samples per
+    /// channel — colour-hdri's default sampling (it takes 1000).
+    pub fn histogram_method(samples: usize) -> Self {
+        Self {
+            samples,
+            histogram: true,
             ..Self::default()
         }
     }
@@ -331,6 +356,10 @@ pub struct SampleReport {
     /// Samples taken by the stratified draw ([`SampleOptions::stratify`]); included in `used`.
     #[serde(default)]
     pub stratified: usize,
+    /// The samples are rank-matched histogram samples ([`SampleOptions::histogram`]): no
+    /// positions, nothing rejected.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub histogram: bool,
 }
 
 impl SampleReport {
@@ -399,6 +428,12 @@ pub struct Samples {
 }
 
 impl Samples {
+    /// The number of samples `N` (each seen in every frame). Histogram samples have no
+    /// positions, so this is not always `positions.len()`.
+    pub fn count(&self) -> usize {
+        self.values.len() / self.frames.max(1)
+    }
+
     /// The code (8-bit scale, possibly fractional) of sample `i`, frame `j`, channel `c`.
     #[inline]
     pub fn z(&self, i: usize, j: usize, c: usize) -> f32 {
@@ -458,6 +493,9 @@ pub fn sample(
     opts: &SampleOptions,
 ) -> Result<Samples, SamplingError> {
     opts.validate()?;
+    if opts.histogram {
+        return histogram::sample_histogram(frames, circle, opts);
+    }
     let size = check_frames(frames)?;
     let whole = Whole { frames, size };
     match sample_from(&whole, size, circle, opts)? {

@@ -1,0 +1,517 @@
+//! The noise-aware merge of 8-bit frames in one vector sweep: the hat's estimate and its
+//! refinement ([`Refine`]) for eight samples at a time, with AVX2 gathers for the table
+//! look-ups, chosen at run time (`is_x86_feature_detected!`). It gives the same bits as the
+//! scalar path ([`merge_band`](super::hat)'s hat pass, then [`refine_row`](super::refine)):
+//! the same `f32` operations in the same order on every sample, no fused multiply-add.
+//!
+//! Why it pays: the scalar path looks every code up twice (the hat's table, then the vote
+//! table), writes the hat's estimate, its weight-row index and two sums per sample to memory
+//! and reads them back, and its look-ups are scalar loads that the compiler moves into vector
+//! lanes one by one. Here each frame's vote is gathered once and serves both passes; the hat's
+//! weight and the observed-code factor come from the code by arithmetic (a min, compares, and a
+//! 16-entry in-register table), so a sample costs one gather per frame for its vote and one per
+//! frame for its weight row; nothing but the result goes back to memory.
+//!
+//! The arithmetic stands in for table entries, so [`Fused::new`] checks it against the scalar
+//! path's tables for every frame, channel and code and declines (the scalar path runs) on any
+//! difference — a weighting this kernel does not know can never change a result.
+
+// Beyond x86-64 `Fused::new` always declines, and the tables it would fill are never read.
+#![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+
+use super::refine::Refine;
+
+/// Frames the kernel is unrolled for; more take the scalar path.
+pub(super) const MAX_FRAMES: usize = 9;
+/// Samples per step: eight pixels, so every lane's channel repeats from step to step.
+pub(super) const STEP: usize = 24;
+
+/// The vector kernel's tables for one merge of `frames` 8-bit frames (see the module docs).
+pub(super) struct Fused {
+    frames: usize,
+    /// Frame-major, then channel, then code: frame `j`'s vote `log2 E_j` (as in [`Refine`]).
+    votes: Vec<f32>,
+    /// The observed-code factor of code `255 − k`, for `k = 0 ..= 15` (`k` clamped to 15 below
+    /// code 240): what the factor table holds above the black level.
+    fade: [f32; 16],
+    /// Codes at or below it get no weight.
+    black: i32,
+    /// [`Refine`]'s weight rows, `frames` values a row.
+    rows: Vec<f32>,
+    /// Per channel: [`Refine`]'s bin offset, last bin and first row.
+    off: [f32; 3],
+    last: [f32; 3],
+    start: [i32; 3],
+}
+
+impl Fused {
+    /// The kernel's tables for the refinement `r` of 8-bit frames whose hat pass uses `hat`
+    /// (per frame, channel and code `[w, w · log2 E_j]`), or `None` when the CPU has no AVX2,
+    /// the input is not 8-bit, the frame count is beyond [`MAX_FRAMES`], or the kernel's
+    /// arithmetic would give any weight other than the tables' (see the module docs).
+    pub(super) fn new<const N: usize>(
+        r: &Refine<N>,
+        hat: impl Fn(usize, usize, usize) -> [f32; 2],
+        black: u8,
+    ) -> Option<Self> {
+        if N != 256 || !(1..=MAX_FRAMES).contains(&r.frames) || !available() {
+            return None;
+        }
+        let p = r.frames;
+        let entry = |j: usize, c: usize, z: usize| r.votes[(j * 3 + c) * N + z];
+        let mut fade = [0f32; 16];
+        for (k, f) in fade.iter_mut().enumerate() {
+            *f = entry(0, 0, 255 - k)[1];
+        }
+        let fused = Self {
+            frames: p,
+            votes: (0..p * 3 * N).map(|i| r.votes[i][0]).collect(),
+            fade,
+            black: black as i32,
+            // Padded for the kernel's 16-byte loads of a row (see `avx2::run`).
+            rows: r.rows.iter().copied().chain([0.0; 3]).collect(),
+            off: r.off,
+            last: r.last,
+            start: r.start,
+        };
+        // Every weight the kernel computes must be the table's, bit for bit.
+        for j in 0..p {
+            for c in 0..3 {
+                for z in 0..N {
+                    let [vote, f] = entry(j, c, z);
+                    let w = hat_weight(j, p, z as u8);
+                    let want = hat(j, c, z);
+                    if fused.factor(z as u8).to_bits() != f.to_bits()
+                        || w.to_bits() != want[0].to_bits()
+                        || (w * vote).to_bits() != want[1].to_bits()
+                    {
+                        return None;
+                    }
+                }
+            }
+        }
+        // Every row a clamped bin can name is in the table (the kernel clamps to it as well).
+        for c in 0..3 {
+            let end = (fused.start[c] as usize + fused.last[c] as usize + 1) * p;
+            if !(0.0..4_194_304.0).contains(&fused.last[c]) || end > fused.rows.len() {
+                return None;
+            }
+        }
+        Some(fused)
+    }
+
+    /// The observed-code factor as the kernel computes it.
+    fn factor(&self, z: u8) -> f32 {
+        if z as i32 > self.black {
+            self.fade[(255 - z as usize).min(15)]
+        } else {
+            0.0
+        }
+    }
+
+    /// Merges the first whole [`STEP`]s of one row: `rows` holds the row of every frame (8-bit
+    /// codes), `out` receives the radiance. Returns how many samples it merged (a multiple of
+    /// [`STEP`]); the caller merges the rest.
+    pub(super) fn row(&self, rows: &[&[u8]], out: &mut [f32]) -> usize {
+        if rows.len() != self.frames {
+            return 0;
+        }
+        #[cfg(target_arch = "x86_64")]
+        {
+            // SAFETY: `Fused` exists only where `available()` found AVX2 on this CPU.
+            unsafe { avx2::row(self, rows, out) }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = out;
+            0
+        }
+    }
+}
+
+/// The hat weight of code `z` in frame `j` of `p` as the kernel computes it: the same as
+/// [`weight`](super::hat::weight) for 8-bit codes under the hat (checked by [`Fused::new`]).
+fn hat_weight(j: usize, p: usize, z: u8) -> f32 {
+    let mut w = z.min(255 - z) as f32;
+    if j == 0 && z >= 128 {
+        w = super::hat::W_MAX;
+    }
+    if j + 1 == p && z <= 127 {
+        w = super::hat::W_MAX;
+    }
+    if j == 0 {
+        w = w.max(super::hat::W_FLOOR);
+    }
+    w
+}
+
+/// Whether this CPU runs the kernel.
+fn available() -> bool {
+    #[cfg(test)]
+    if tests::SCALAR.with(|s| s.get()) {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{Fused, MAX_FRAMES, STEP};
+    use crate::fastmath::{EXP2_C, EXP2_LIMIT, EXP2_MAGIC};
+    use std::arch::x86_64::*;
+
+    /// [`Fused::row`] for AVX2.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn row(k: &Fused, rows: &[&[u8]], out: &mut [f32]) -> usize {
+        match rows.len() {
+            1 => run::<1>(k, rows, out),
+            2 => run::<2>(k, rows, out),
+            3 => run::<3>(k, rows, out),
+            4 => run::<4>(k, rows, out),
+            5 => run::<5>(k, rows, out),
+            6 => run::<6>(k, rows, out),
+            7 => run::<7>(k, rows, out),
+            8 => run::<8>(k, rows, out),
+            9 => run::<9>(k, rows, out),
+            _ => 0,
+        }
+    }
+
+    /// The kernel for `P` frames.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn run<const P: usize>(k: &Fused, rows: &[&[u8]], out: &mut [f32]) -> usize {
+        const { assert!(P <= MAX_FRAMES) };
+        let n = rows.iter().map(|r| r.len()).fold(out.len(), usize::min) / STEP * STEP;
+        let codes: [&[u8]; P] = std::array::from_fn(|j| &rows[j][..n]);
+        let out = &mut out[..n];
+        // Per lane of each of the three vectors of a step: its channel's constants.
+        let lane = |q: usize, f: &dyn Fn(usize) -> i32| {
+            let v: [i32; 8] = std::array::from_fn(|l| f((8 * q + l) % 3));
+            _mm256_setr_epi32(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])
+        };
+        let lane_f = |q: usize, f: &dyn Fn(usize) -> f32| {
+            let v: [f32; 8] = std::array::from_fn(|l| f((8 * q + l) % 3));
+            _mm256_setr_ps(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])
+        };
+        let chan: [__m256i; 3] = std::array::from_fn(|q| lane(q, &|c| (c * 256) as i32));
+        let start: [__m256i; 3] = std::array::from_fn(|q| lane(q, &|c| k.start[c]));
+        let off: [__m256; 3] = std::array::from_fn(|q| lane_f(q, &|c| k.off[c]));
+        let last: [__m256; 3] = std::array::from_fn(|q| lane_f(q, &|c| k.last[c]));
+        let fd = &k.fade;
+        let fade_lo = _mm256_setr_ps(fd[0], fd[1], fd[2], fd[3], fd[4], fd[5], fd[6], fd[7]);
+        let fade_hi = _mm256_setr_ps(fd[8], fd[9], fd[10], fd[11], fd[12], fd[13], fd[14], fd[15]);
+        let black = _mm256_set1_epi32(k.black);
+        let zero = _mm256_setzero_ps();
+        let bins = _mm256_set1_ps(super::super::refine::BINS_PER_STOP);
+        // The last row's first entry: every row index is clamped to `0 ..= max_base` (a clamped
+        // bin is in range by construction; the clamp keeps every read in bounds whatever it holds).
+        let max_base = _mm256_set1_epi32((k.rows.len() - 3 - P) as i32);
+        let stride = _mm256_set1_epi32(P as i32);
+        let votes = k.votes.as_ptr();
+        let wrows = k.rows.as_ptr();
+        // Blocks of up to BLOCK vectors, each in two stages: the hat's estimate and weight row
+        // of every vector, then every vector's refinement. A vector's work is one long chain
+        // (gathers, a division, the bin, gathers that need it, a division, `2^x`); in stages,
+        // the independent vectors of a block overlap.
+        const BLOCK: usize = 12;
+        let mut e0s = [zero; BLOCK];
+        let mut bases = [_mm256_setzero_si256(); BLOCK];
+        let mut vs = [[zero; P]; BLOCK];
+        let code_at = |j: usize, s: usize| {
+            let b: [u8; 8] = match codes[j][s..s + 8].try_into() {
+                Ok(b) => b,
+                Err(_) => unreachable!("8 codes"),
+            };
+            _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(i64::from_le_bytes(b)))
+        };
+        let mut s0 = 0;
+        while s0 < n {
+            let count = ((n - s0) / 8).min(BLOCK);
+            for v in 0..count {
+                let s = s0 + 8 * v;
+                let q = (s / 8) % 3;
+                let vote = &mut vs[v];
+                let (mut num, mut den, mut gn, mut gd) = (zero, zero, zero, zero);
+                for (j, vj) in vote.iter_mut().enumerate() {
+                    let z = code_at(j, s);
+                    // SAFETY: frame j's votes are `3 · 256` values from `votes + 768 j`, and
+                    // the index is a channel's 256 codes (`chan` ≤ 512) plus a code (≤ 255).
+                    *vj = unsafe {
+                        _mm256_i32gather_ps::<4>(votes.add(j * 768), _mm256_add_epi32(z, chan[q]))
+                    };
+                    let w = hat_weight::<P>(j, z);
+                    let wv = _mm256_mul_ps(w, *vj);
+                    // The hat's sums, three frames to a group as the scalar path adds them.
+                    if j % 3 == 0 {
+                        (gd, gn) = (w, wv);
+                    } else {
+                        gd = _mm256_add_ps(gd, w);
+                        gn = _mm256_add_ps(gn, wv);
+                    }
+                    if j % 3 == 2 || j + 1 == P {
+                        if j < 3 {
+                            (num, den) = (gn, gd);
+                        } else {
+                            num = _mm256_add_ps(num, gn);
+                            den = _mm256_add_ps(den, gd);
+                        }
+                    }
+                }
+                // The hat's log2 E₀ and its weight row (`floor_bin` of refine.rs).
+                let e0 = _mm256_div_ps(num, den);
+                let x = _mm256_sub_ps(_mm256_mul_ps(e0, bins), off[q]);
+                let x = _mm256_min_ps(_mm256_max_ps(x, zero), last[q]);
+                let bias = _mm256_set1_ps(8_388_608.0);
+                let t = _mm256_add_ps(x, bias);
+                let rounded = _mm256_sub_epi32(_mm256_castps_si256(t), _mm256_castps_si256(bias));
+                let up =
+                    _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_sub_ps(t, bias), x));
+                let at = _mm256_add_epi32(start[q], _mm256_add_epi32(rounded, up));
+                e0s[v] = e0;
+                let base = _mm256_mullo_epi32(at, stride);
+                bases[v] =
+                    _mm256_max_epi32(_mm256_min_epi32(base, max_base), _mm256_setzero_si256());
+            }
+            for v in 0..count {
+                let s = s0 + 8 * v;
+                // Every frame's weight for the 8 samples: up to four frames by one 16-byte load a
+                // sample and a transpose, more by gathers.
+                let mut wrow = [zero; P];
+                if P <= 4 {
+                    let mut b = [0i32; 8];
+                    // SAFETY: `b` is 8 writable `i32`s.
+                    unsafe { _mm256_storeu_si256(b.as_mut_ptr().cast(), bases[v]) };
+                    // SAFETY: 0 ≤ base ≤ (rows.len() − 3) − P (clamped above) with P ≥ 1, and
+                    // `rows` has 3 values of padding, so the 4 values from a base are in it.
+                    let ld = |i: usize| unsafe { _mm_loadu_ps(wrows.add(b[i] as usize)) };
+                    let r0 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(0)), ld(4));
+                    let r1 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(1)), ld(5));
+                    let r2 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(2)), ld(6));
+                    let r3 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(3)), ld(7));
+                    let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
+                    let (t2, t3) = (_mm256_unpacklo_ps(r2, r3), _mm256_unpackhi_ps(r2, r3));
+                    let cols = [
+                        _mm256_castpd_ps(_mm256_unpacklo_pd(
+                            _mm256_castps_pd(t0),
+                            _mm256_castps_pd(t2),
+                        )),
+                        _mm256_castpd_ps(_mm256_unpackhi_pd(
+                            _mm256_castps_pd(t0),
+                            _mm256_castps_pd(t2),
+                        )),
+                        _mm256_castpd_ps(_mm256_unpacklo_pd(
+                            _mm256_castps_pd(t1),
+                            _mm256_castps_pd(t3),
+                        )),
+                        _mm256_castpd_ps(_mm256_unpackhi_pd(
+                            _mm256_castps_pd(t1),
+                            _mm256_castps_pd(t3),
+                        )),
+                    ];
+                    wrow.copy_from_slice(&cols[..P]);
+                } else {
+                    for (j, w) in wrow.iter_mut().enumerate() {
+                        // SAFETY: 0 ≤ base ≤ rows.len() − 3 − P (clamped above) and j < P.
+                        *w = unsafe {
+                            _mm256_i32gather_ps::<4>(
+                                wrows,
+                                _mm256_add_epi32(bases[v], _mm256_set1_epi32(j as i32)),
+                            )
+                        };
+                    }
+                }
+                let (mut n2, mut d2) = (zero, zero);
+                for j in 0..P {
+                    let z = code_at(j, s);
+                    let kk = _mm256_min_epi32(
+                        _mm256_sub_epi32(_mm256_set1_epi32(255), z),
+                        _mm256_set1_epi32(15),
+                    );
+                    let lo = _mm256_permutevar8x32_ps(fade_lo, kk);
+                    let hi = _mm256_permutevar8x32_ps(fade_hi, kk);
+                    let f = _mm256_blendv_ps(
+                        lo,
+                        hi,
+                        _mm256_castsi256_ps(_mm256_cmpgt_epi32(kk, _mm256_set1_epi32(7))),
+                    );
+                    let f = _mm256_and_ps(f, _mm256_castsi256_ps(_mm256_cmpgt_epi32(z, black)));
+                    let wt = _mm256_mul_ps(f, wrow[j]);
+                    n2 = _mm256_add_ps(n2, _mm256_mul_ps(wt, vs[v][j]));
+                    d2 = _mm256_add_ps(d2, wt);
+                }
+                // `refined`: the refined value where some frame voted and E₀ is a number.
+                let e0 = e0s[v];
+                let x = _mm256_div_ps(n2, d2);
+                let ok = _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GT_OQ>(d2, zero),
+                    _mm256_cmp_ps::<_CMP_ORD_Q>(e0, e0),
+                );
+                let r = exp2(_mm256_blendv_ps(e0, x, ok));
+                let o = &mut out[s..s + 8];
+                // SAFETY: `o` is 8 writable `f32`s.
+                unsafe { _mm256_storeu_ps(o.as_mut_ptr(), r) };
+            }
+            s0 += 8 * count;
+        }
+        n
+    }
+
+    /// `super::hat_weight` for eight codes.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn hat_weight<const P: usize>(j: usize, z: __m256i) -> __m256 {
+        let full = _mm256_set1_ps(super::super::hat::W_MAX);
+        let mut w = _mm256_cvtepi32_ps(_mm256_min_epi32(
+            z,
+            _mm256_sub_epi32(_mm256_set1_epi32(255), z),
+        ));
+        if j == 0 {
+            let high = _mm256_cmpgt_epi32(z, _mm256_set1_epi32(127));
+            w = _mm256_blendv_ps(w, full, _mm256_castsi256_ps(high));
+        }
+        if j + 1 == P {
+            let low = _mm256_cmpgt_epi32(_mm256_set1_epi32(128), z);
+            w = _mm256_blendv_ps(w, full, _mm256_castsi256_ps(low));
+        }
+        if j == 0 {
+            w = _mm256_max_ps(w, _mm256_set1_ps(super::super::hat::W_FLOOR));
+        }
+        w
+    }
+
+    /// [`crate::fastmath::exp2`] for eight values: the same operations in the same order.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn exp2(x: __m256) -> __m256 {
+        // `x.clamp(−L, L)`: NaN stays NaN (`maxps`/`minps` return their second operand then).
+        let x = _mm256_max_ps(_mm256_set1_ps(-EXP2_LIMIT), x);
+        let x = _mm256_min_ps(_mm256_set1_ps(EXP2_LIMIT), x);
+        let magic = _mm256_set1_ps(EXP2_MAGIC);
+        let t = _mm256_add_ps(x, magic);
+        let k = _mm256_sub_epi32(_mm256_castps_si256(t), _mm256_castps_si256(magic));
+        let f = _mm256_sub_ps(x, _mm256_sub_ps(t, magic));
+        let c = EXP2_C.map(|v| _mm256_set1_ps(v));
+        let p = _mm256_add_ps(c[4], _mm256_mul_ps(f, c[5]));
+        let p = _mm256_add_ps(c[3], _mm256_mul_ps(f, p));
+        let p = _mm256_add_ps(c[2], _mm256_mul_ps(f, p));
+        let p = _mm256_add_ps(c[1], _mm256_mul_ps(f, p));
+        let p = _mm256_add_ps(c[0], _mm256_mul_ps(f, p));
+        let scale = _mm256_slli_epi32::<23>(_mm256_add_epi32(k, _mm256_set1_epi32(127)));
+        _mm256_mul_ps(p, _mm256_castsi256_ps(scale))
+    }
+}
+
+#[cfg(test)]
+pub(super) mod tests {
+    use crate::bracket::{Exposure, Frame, Pixels};
+    use crate::merge::{merge, MergeOptions, Weighting};
+    use crate::noise::NoiseModel;
+    use crate::response::{Response, LEVELS};
+    use std::cell::Cell;
+
+    thread_local! {
+        /// Set, this thread's merges take the scalar path.
+        pub(in crate::merge) static SCALAR: Cell<bool> = const { Cell::new(false) };
+    }
+
+    /// Random 8-bit frames, a third of the codes at the black level, the top fade or a bound.
+    fn frames(p: usize, w: usize, h: usize, seed: u64) -> Vec<Frame> {
+        let mut state = seed | 1;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        (0..p)
+            .map(|j| {
+                let pixels = (0..w * h * 3)
+                    .map(|_| match next() % 9 {
+                        0 => 0,
+                        1 => 255,
+                        2 => 240 + (next() % 16) as u8,
+                        3 => (next() % 16) as u8,
+                        _ => next() as u8,
+                    })
+                    .collect();
+                Frame {
+                    name: format!("f{j}"),
+                    width: w,
+                    height: h,
+                    pixels: Pixels::U8(pixels),
+                    exposure: Exposure {
+                        time_s: 2f64.powf(1.5 * j as f64) / 100.0,
+                        iso: None,
+                        f_number: None,
+                    },
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_vector_kernel_gives_the_scalar_paths_bits() {
+        if !super::available() {
+            println!("skipped: this CPU has no AVX2, so only the scalar path exists");
+            return;
+        }
+        let r = Response::from_curves([0.9, 1.0, 1.1].map(|a| {
+            (0..LEVELS)
+                .map(|z| a * ((z as f64 + 0.5) / 128.5).ln())
+                .collect::<Vec<_>>()
+        }))
+        .unwrap();
+        let model = NoiseModel::default();
+        for p in 1..=super::MAX_FRAMES + 1 {
+            for black in [0u8, 9] {
+                // 37 pixels a row: four steps of eight pixels and a scalar tail of five.
+                let fs = frames(p, 37, 11, 7 + p as u64 + black as u64);
+                let lt: Vec<f64> = fs.iter().map(|f| f.exposure.relative().ln()).collect();
+                let g = |c: usize, v: usize| r.curve(c)[v];
+                let refine = super::Refine::<256>::new(&lt, &r, &model, black, g);
+                let hat = super::super::hat::Tables::<256>::new(
+                    &lt,
+                    |j, _c, z| super::super::hat::weight(z, j, p, Weighting::Hat),
+                    g,
+                );
+                let fused = super::Fused::new(&refine, |j, c, z| hat.entry(j, c, z), black);
+                assert_eq!(
+                    fused.is_some(),
+                    p <= super::MAX_FRAMES,
+                    "{p} frames, black {black}: the kernel should run up to {} frames",
+                    super::MAX_FRAMES
+                );
+                let o = MergeOptions {
+                    weighting: Weighting::Noise,
+                    noise: Some(model),
+                    black_level: black,
+                    ..Default::default()
+                };
+                let vector = merge(&fs, &r, &o).unwrap().radiance.data;
+                SCALAR.with(|s| s.set(true));
+                let scalar = merge(&fs, &r, &o).unwrap().radiance.data;
+                SCALAR.with(|s| s.set(false));
+                let differ = vector
+                    .iter()
+                    .zip(&scalar)
+                    .filter(|(a, b)| a.to_bits() != b.to_bits())
+                    .count();
+                assert_eq!(
+                    differ, 0,
+                    "{p} frames, black {black}: {differ} samples differ"
+                );
+            }
+        }
+    }
+}
