@@ -62,7 +62,7 @@ pub use progress::{no_progress, Progress, Stage};
 pub use report::{Dome, ErrorSummary, FrameSummary, RawReport, Report};
 pub use sky_stage::{GeometryReport, NorthFromSun, SunSource};
 use sky_stage::{SkyOutcome, SkyResult};
-pub use stream::streams;
+pub use stream::{decoded_size, streams, streams_input};
 
 /// Errors of [`run`]: the stage's own error, or cancellation.
 #[derive(Debug, thiserror::Error)]
