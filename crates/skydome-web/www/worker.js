@@ -64,7 +64,7 @@ let memoryRef = null;
 const ready = loadCore().then(({ m, wasm, info }) => {
   ({
     Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
-    list_times, decoding_progress, sentence, warm_up, streams_frames,
+    list_times, decoding_progress, sentence, warm_up,
   } = m);
   coreInfo = info;
   memoryRef = wasm.memory || null;

@@ -1,6 +1,7 @@
 //! The streamed intake: a bracket of encoded photos whose dome is a plain crop (the case of
 //! [`super::merge_window`]) is read one frame at a time (a few at once with the `parallel`
-//! feature), never all of it decoded at once: a phone's nine 12 MP frames are 330 MB decoded,
+//! feature, as many as the memory budget holds beside the best-exposed frame), never all of it
+//! decoded at once: a phone's nine 12 MP frames are 330 MB decoded,
 //! which a phone's browser tab cannot hold beside everything else.
 //!
 //! Two passes over the encoded bytes (a JPEG is a tenth of its decoded size):
@@ -112,6 +113,16 @@ pub fn decoded_size(frames: &[EncodedFrame]) -> u64 {
         .sum()
 }
 
+/// How many photos the streamed intake decodes at once (one per thread of the pool with the
+/// `parallel` feature) so that they and the best-exposed photo it keeps stay within `budget`
+/// bytes, photos of at most `frame_bytes` decoded: at least one.
+fn group_size(budget: u64, frame_bytes: u64) -> usize {
+    let fit = (budget / frame_bytes.max(1)).saturating_sub(1);
+    usize::try_from(fit)
+        .unwrap_or(usize::MAX)
+        .clamp(1, threads())
+}
+
 /// The decoded size of one encoded photo from its header, `None` when it does not read.
 fn header_size(bytes: &[u8]) -> Option<u64> {
     use image::ImageDecoder;
@@ -154,7 +165,13 @@ pub(super) fn intake(
         return Ok(None);
     }
     progress.at(Stage::Decoding, 0.0)?;
-    let Some(scan) = scan(frames, input, progress)? else {
+    let largest = frames
+        .iter()
+        .filter_map(|f| header_size(&f.bytes))
+        .max()
+        .unwrap_or(0);
+    let at_once = group_size(options.frame_memory_budget.unwrap_or(u64::MAX), largest);
+    let Some(scan) = scan(frames, input, at_once, progress)? else {
         return Ok(None);
     };
     let Scan {
@@ -240,7 +257,7 @@ pub(super) fn intake(
         }
     };
     let all: Vec<usize> = (0..order.len()).collect();
-    for group in all.chunks(group_size()) {
+    for group in all.chunks(at_once) {
         // The best-exposed frame is at hand already: it is taken rather than decoded.
         let done = in_parallel(group, |&j| (order[j] != best_index).then(|| read(order[j])));
         for (d, &j) in done.into_iter().zip(group) {
@@ -286,7 +303,7 @@ pub(super) fn intake(
                             return Ok(None);
                         }
                         let mut g = Gathered::new(&more, order.len(), o.sampling.patch, (w, h));
-                        for group in all.chunks(group_size()) {
+                        for group in all.chunks(at_once) {
                             let done = in_parallel(group, |&j| read(order[j]));
                             for (d, &j) in done.into_iter().zip(group) {
                                 let Some(px) = d else {
@@ -330,6 +347,7 @@ struct Scan {
 fn scan(
     frames: &[EncodedFrame],
     input: &Input,
+    at_once: usize,
     progress: &mut Reporter<'_>,
 ) -> Result<Option<Scan>, PipelineError> {
     let mut thumbs = Vec::with_capacity(frames.len());
@@ -337,7 +355,7 @@ fn scan(
     // (well-exposed count, relative exposure, input index, pixels)
     let mut best: Option<(usize, f64, usize, Vec<u8>)> = None;
     let indices: Vec<usize> = (0..frames.len()).collect();
-    for group in indices.chunks(group_size()) {
+    for group in indices.chunks(at_once) {
         let done = in_parallel(group, |&i| decode_oriented(&frames[i], input));
         for (d, &i) in done.into_iter().zip(group) {
             let Some(Decoded { mut frame, .. }) = d? else {
@@ -411,15 +429,15 @@ fn decode_oriented(
     Ok(Some(Decoded { frame, size }))
 }
 
-/// How many frames are decoded at once: one per thread of the pool.
+/// The threads of the pool.
 #[cfg(feature = "parallel")]
-fn group_size() -> usize {
+fn threads() -> usize {
     rayon::current_num_threads().max(1)
 }
 
-/// How many frames are decoded at once: one without the `parallel` feature.
+/// One thread without the `parallel` feature.
 #[cfg(not(feature = "parallel"))]
-fn group_size() -> usize {
+fn threads() -> usize {
     1
 }
 
