@@ -9,6 +9,9 @@
 // --threads N loads the page with ?threads=N: the threaded core with a pool of N workers (the
 // page is cross-origin isolated by `skydome serve`), 0 the single-threaded core; without it the
 // app picks (one thread per core).
+// --memory MiB loads the page with ?memory=MiB: the budget for the photos decoded at once (the
+// app's default 256 MiB; `none`, no limit); above it the core reads them one at a time
+// (`streamed` in the output).
 // Speed is measured here, never asserted in tests.
 import { execFileSync, spawnSync } from 'node:child_process';
 import { existsSync, readFileSync, readdirSync, writeFileSync } from 'node:fs';
@@ -27,6 +30,7 @@ const size = Number(arg('--size', '3464')); // 3464² = 12.0 MP
 const outFile = arg('--out', null);
 const threads = arg('--threads', null);
 const evs = arg('--evs', '-2,0,2');
+const memory = arg('--memory', null);
 
 /** Memory of this test's Chromium renderer processes (command lines carry the fresh profile's
  *  folder, so other Chromium instances on the machine are not counted): for each, the resident
@@ -99,7 +103,10 @@ try {
   await p.page.addInitScript(() => {
     navigator.mediaDevices.getUserMedia = () => Promise.reject(new DOMException('measuring without a camera', 'NotAllowedError'));
   });
-  await p.page.goto(`${server.origin}/${threads != null ? `?threads=${threads}` : ''}`);
+  const query = new URLSearchParams();
+  if (threads != null) query.set('threads', threads);
+  if (memory != null) query.set('memory', memory);
+  await p.page.goto(`${server.origin}/${query.size ? `?${query}` : ''}`);
   await onScreen(p.page, 'camera');
   await p.page.waitForFunction(() => document.body.dataset.core);
   await setSettings(p.page, { fisheye: true, sun: 'auto', north: '0', equirect: false });
@@ -127,12 +134,14 @@ try {
   const stageMemory = await p.page.evaluate(() => window.__skydomeStageMemory);
   const wasm = await p.page.evaluate(() => window.__skydomeAsk('memory'));
   const coreInfo = await p.page.evaluate(() => window.__skydomeCore);
+  const streamed = await p.page.evaluate(() => window.__skydomeStreamed);
   // The .wasm the page loaded.
   const wasmFile = path.join(appDir, coreInfo && coreInfo.build === 'threaded' ? 'pkg-mt' : 'pkg', 'skydome_web_bg.wasm');
   const gz = gzipSync(readFileSync(wasmFile), { level: 9 }).length;
   const raw = readFileSync(wasmFile).length;
   const result = {
     core: coreInfo,
+    streamed,
     frames: frames.length,
     megapixels_each: (size * size) / 1e6,
     browser_core_s: core / 1000,

@@ -451,8 +451,13 @@ fn options(a: &Args) -> Result<Options> {
     a.run.options(products)
 }
 
-/// The options' fingerprint: everything that changes an output byte.
+/// The options' fingerprint: everything that changes an output byte (not the memory budget,
+/// which changes only how the photos are read: shards on nodes of different sizes agree).
 fn fingerprint(a: &Args, o: &Options) -> Result<String> {
+    let o = Options {
+        frame_memory_budget: None,
+        ..o.clone()
+    };
     let all = serde_json::json!({
         "skydome": skydome::VERSION,
         "options": o,

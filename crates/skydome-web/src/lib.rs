@@ -483,6 +483,35 @@ impl Job {
         Ok(())
     }
 
+    /// Whether a run of this job's photos (all as added, none decoded yet) with
+    /// `options_json` ([`Options`] as JSON) reads them one at a time
+    /// ([`pipeline::streams_input`]: the options' frame memory budget is below the photos'
+    /// decoded size and the job is a plain crop to the dome), so the page should hand it the
+    /// files rather than decode them beforehand (decoded beforehand, every photo would be in
+    /// memory at once). Options that do not parse: `false` (the run reports them).
+    pub fn streams(&mut self, options_json: &str) -> bool {
+        let Ok(options) = parse_options(options_json) else {
+            return false;
+        };
+        if !self.frames.iter().all(|f| matches!(f, Photo::Encoded(_))) {
+            return false;
+        }
+        // The photos move to the input and back (no copy of their bytes).
+        let encoded = std::mem::take(&mut self.frames)
+            .into_iter()
+            .filter_map(|f| match f {
+                Photo::Encoded(e) => Some(e),
+                Photo::Decoded(_) => None,
+            })
+            .collect();
+        let input = Input::new(Frames::Encoded(encoded));
+        let streams = pipeline::streams_input(&input, &options);
+        if let Frames::Encoded(e) = input.frames {
+            self.frames = e.into_iter().map(Photo::Encoded).collect();
+        }
+        streams
+    }
+
     fn slot(&mut self, index: usize) -> Result<&mut Photo, JsError> {
         let n = self.frames.len();
         self.frames.get_mut(index).ok_or_else(|| {

@@ -86,10 +86,14 @@ const pending = new Map();
 // `?threads=N` on the page's URL sets the threaded core's pool size (0: the single-threaded
 // core); without it the worker picks (one thread per core, when the page is isolated).
 const threadsAsked = new URLSearchParams(location.search).get('threads');
+// `?memory=MiB` sets the budget for a bracket's photos decoded at once (the worker's default:
+// 256 MiB; above it the core reads them one at a time).
+const memoryAsked = new URLSearchParams(location.search).get('memory');
 
 function startWorker() {
   const url = new URL('./worker.js', import.meta.url);
   if (threadsAsked != null) url.searchParams.set('threads', threadsAsked);
+  if (memoryAsked != null) url.searchParams.set('memory', memoryAsked);
   worker = new Worker(url, { type: 'module' });
   worker.onmessage = (e) => {
     const { id, progress, result, error, kind } = e.data;
@@ -402,6 +406,7 @@ async function afterRun(result) {
   window.__skydomeStageMs = result.stages;
   window.__skydomeStageMemory = result.stageMemory;
   window.__skydomeCore = result.core;
+  window.__skydomeStreamed = result.streamed === true; // whether the core read the photos one at a time
   document.body.dataset.ready = String(Date.now());
 }
 

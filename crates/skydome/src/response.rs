@@ -439,6 +439,29 @@ pub fn calibrate(
     calibrate_samples_with(samples, &lt, opts)
 }
 
+/// [`calibrate`] with the samples drawn already (by [`crate::sampling::sample_from`] on what
+/// was gathered while the frames were decoded one at a time): the same checks and fit.
+pub(crate) fn calibrate_with_samples(
+    frames: &[Frame],
+    samples: Samples,
+    opts: &CalibrateOptions,
+) -> Result<Calibration, ResponseError> {
+    if frames.len() < 2 {
+        return Err(ResponseError::TooFewFrames(frames.len()));
+    }
+    let lt = log_times(frames)?;
+    check_lambda(opts.lambda)?;
+    if samples.positions.is_empty() {
+        let r = &samples.report;
+        return Err(ResponseError::NoSamples {
+            clipped: r.rejected_clipped,
+            edge: r.rejected_edge,
+            non_monotonic: r.rejected_non_monotonic,
+        });
+    }
+    calibrate_samples_fit(samples, &lt, opts.lambda, opts.solver, opts.fit)
+}
+
 fn check_lambda(lambda: f64) -> Result<(), ResponseError> {
     if !(lambda.is_finite() && lambda > 0.0 && lambda <= 1e6) {
         return Err(ResponseError::BadOption(format!(

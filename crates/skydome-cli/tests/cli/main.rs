@@ -23,6 +23,7 @@ mod batch_slurm;
 mod calibrate_align;
 mod demo;
 mod flat_field;
+mod memory_budget;
 mod pipeline_identity;
 mod radiance_tools;
 mod raw;

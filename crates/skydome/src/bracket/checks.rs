@@ -33,15 +33,47 @@ pub fn assemble_with_black_level(
     orientation: OrientationPolicy,
     black_level: u8,
 ) -> Result<Bracket, BracketError> {
+    assemble_impl(decoded, times, orientation, black_level, false)
+}
+
+/// [`assemble_with_black_level`] on frames that are already oriented and carry only every
+/// 7th pixel ([`every_7th_pixel`]): every check below reads those pixels alone, so the bracket (its
+/// order, the frames left out, the warnings, the refusals) is the one the whole frames give,
+/// while the whole frames never have to be in memory together. Each frame's `width` and
+/// `height` are its stored (pre-orientation) size, as decoded. The frames of the result carry
+/// the thumbnails as their pixels.
+pub(crate) fn assemble_thumbnails(
+    decoded: Vec<DecodedFrame>,
+    times: Option<&[f64]>,
+    orientation: OrientationPolicy,
+    black_level: u8,
+) -> Result<Bracket, BracketError> {
+    assemble_impl(decoded, times, orientation, black_level, true)
+}
+
+/// The samples of every 7th pixel (pixels 0, 7, 14, … in row-major order, all three channels)
+/// of an oriented frame's interleaved RGB samples `v`: all that [`assemble`]'s checks read, a
+/// frame's thumbnail for [`assemble_thumbnails`].
+pub(crate) fn every_7th_pixel<T: Copy>(v: &[T]) -> Vec<T> {
+    v.chunks(3).step_by(7).flatten().copied().collect()
+}
+
+fn assemble_impl(
+    decoded: Vec<DecodedFrame>,
+    times: Option<&[f64]>,
+    orientation: OrientationPolicy,
+    black_level: u8,
+    thumbs: bool,
+) -> Result<Bracket, BracketError> {
     at_least_two(decoded.len())?;
     if let Some(t) = times {
         one_valid_time_per_frame(t, decoded.len())?;
     }
     frames_agree_in_size_depth_and_orientation(&decoded, orientation)?;
     let mut warnings = settings_that_differ(&decoded);
-    let (frames, info) = oriented_and_sorted_by_exposure(decoded, times, orientation)?;
+    let (frames, info) = oriented_and_sorted_by_exposure(decoded, times, orientation, thumbs)?;
     neighbours_at_least_a_sixth_stop_apart(&frames)?;
-    let (frames, checks) = frames_that_inform(frames, black_level, &mut warnings)?;
+    let (frames, checks) = frames_that_inform(frames, black_level, &mut warnings, thumbs)?;
     // Identical first: frames that carry the same picture wherever both show one are the same
     // scene, whatever a few moving blocks say (a camera that ignored the bracket while
     // something changed in a corner would otherwise be called two scenes).
@@ -165,6 +197,7 @@ fn oriented_and_sorted_by_exposure(
     decoded: Vec<DecodedFrame>,
     times: Option<&[f64]>,
     orientation: OrientationPolicy,
+    thumbs: bool,
 ) -> Result<(Vec<Frame>, CaptureInfo), BracketError> {
     if times.is_none() {
         let missing: Vec<String> = decoded
@@ -194,7 +227,11 @@ fn oriented_and_sorted_by_exposure(
             f_number: d.f_number,
         };
         let (width, height, pixels) = match orientation {
-            OrientationPolicy::Apply if d.info.orientation != 1 => {
+            // Thumbnails of oriented frames: only the size turns.
+            OrientationPolicy::Apply if thumbs && d.info.orientation >= 5 => {
+                (d.height, d.width, d.pixels)
+            }
+            OrientationPolicy::Apply if !thumbs && d.info.orientation != 1 => {
                 orient(d.width, d.height, d.pixels, d.info.orientation)
             }
             _ => (d.width, d.height, d.pixels),
@@ -254,9 +291,14 @@ fn frames_that_inform(
     frames: Vec<Frame>,
     black_level: u8,
     warnings: &mut Vec<String>,
+    thumbs: bool,
 ) -> Result<(Vec<Frame>, Vec<PairCheck>), BracketError> {
-    let floor = black_floor(&frames);
-    let dark = Dark::of(&frames, floor, black_level);
+    fn looks(frames: &[Frame], thumbs: bool) -> Vec<Look<'_>> {
+        frames.iter().map(|f| Look::of(f, thumbs)).collect()
+    }
+    let all = looks(&frames, thumbs);
+    let floor = black_floor(&all);
+    let dark = Dark::of(&all, floor, black_level);
     let total = frames.len();
     // Every frame's informative samples and every neighbouring pair's comparison in one go (in
     // parallel with the `parallel` feature): each is a pass over frames too big for the cache,
@@ -264,18 +306,20 @@ fn frames_that_inform(
     // only when a frame is left out (rare), which makes new neighbours.
     #[cfg(feature = "parallel")]
     let (counts, checks) = rayon::join(
-        || informative_counts(&frames, floor),
-        || compare_neighbours(&frames, &dark),
+        || informative_counts(&all, floor),
+        || compare_neighbours(&all, &dark),
     );
     #[cfg(not(feature = "parallel"))]
     let (counts, checks) = (
-        informative_counts(&frames, floor),
-        compare_neighbours(&frames, &dark),
+        informative_counts(&all, floor),
+        compare_neighbours(&all, &dark),
     );
+    let needed: Vec<usize> = all.iter().map(informative_needed).collect();
+    drop(all);
     let mut kept = Vec::with_capacity(total);
     let mut left_out = Vec::new();
-    for (f, count) in frames.into_iter().zip(counts) {
-        if count < informative_needed(&f) {
+    for ((f, count), needed) in frames.into_iter().zip(counts).zip(needed) {
+        if count < needed {
             left_out.push(f.name);
         } else {
             kept.push(f);
@@ -294,7 +338,7 @@ fn frames_that_inform(
     }
     let checks = match kept.len() == total {
         true => checks,
-        false => compare_neighbours(&kept, &dark),
+        false => compare_neighbours(&looks(&kept, thumbs), &dark),
     };
     Ok((kept, checks))
 }
@@ -396,8 +440,8 @@ fn no_frame_darker_when_exposed_longer(
 }
 
 /// [`compare_pair`] on every neighbouring pair (in parallel with the `parallel` feature).
-fn compare_neighbours(frames: &[Frame], dark: &Dark) -> Vec<PairCheck> {
-    let pairs: Vec<(&Frame, &Frame)> = frames.windows(2).map(|p| (&p[0], &p[1])).collect();
+fn compare_neighbours(frames: &[Look<'_>], dark: &Dark) -> Vec<PairCheck> {
+    let pairs: Vec<(&Look<'_>, &Look<'_>)> = frames.windows(2).map(|p| (&p[0], &p[1])).collect();
     #[cfg(feature = "parallel")]
     let checks = pairs
         .par_iter()
@@ -412,7 +456,7 @@ fn compare_neighbours(frames: &[Frame], dark: &Dark) -> Vec<PairCheck> {
 }
 
 /// [`informative_count`] of every frame (in parallel with the `parallel` feature).
-fn informative_counts(frames: &[Frame], floor: f32) -> Vec<usize> {
+fn informative_counts(frames: &[Look<'_>], floor: f32) -> Vec<usize> {
     #[cfg(feature = "parallel")]
     let counts = frames
         .par_iter()
@@ -466,11 +510,11 @@ const CLIP_UNIT: f32 = 0.98;
 /// The bracket's black level on the unit scale: the 0.5th percentile of every 21st sample of
 /// every frame. 0 for most photos (a black housing or shadows); ≈ 16/255 for a film scan or a
 /// camera that lifts its blacks, where "black" pixels are not 0.
-fn black_floor(frames: &[Frame]) -> f32 {
+fn black_floor(frames: &[Look<'_>]) -> f32 {
     // The same percentile from a histogram of the codes (one pass, no copy or selection of
     // millions of samples): frames of one bit depth, as a bracket's are.
     fn by_histogram<T: Copy + Into<usize>>(
-        frames: &[Frame],
+        frames: &[Look<'_>],
         codes: impl Fn(&Pixels) -> Option<&[T]>,
         bins: usize,
         full: f32,
@@ -478,7 +522,7 @@ fn black_floor(frames: &[Frame]) -> f32 {
         let mut hist = vec![0usize; bins];
         let mut len = 0usize;
         for f in frames {
-            for &c in codes(&f.pixels)?.iter().step_by(21) {
+            for &c in codes(f.pixels)?.iter().step_by(f.step(21)) {
                 hist[c.into()] += 1;
                 len += 1;
             }
@@ -513,7 +557,7 @@ fn black_floor(frames: &[Frame]) -> f32 {
     }
     let mut v: Vec<f32> = frames
         .iter()
-        .flat_map(|f| (0..f.pixels.len()).step_by(21).map(|i| f.pixels.unit(i)))
+        .flat_map(|f| (0..f.len).step_by(21).map(|i| f.unit(i)))
         .collect();
     if v.is_empty() {
         return 0.0;
@@ -530,17 +574,17 @@ fn informative(v: f32, floor: f32) -> bool {
 }
 
 /// Informative values among every 21st sample of a frame.
-fn informative_count(f: &Frame, floor: f32) -> usize {
-    (0..f.pixels.len())
+fn informative_count(f: &Look<'_>, floor: f32) -> usize {
+    (0..f.len)
         .step_by(21)
-        .filter(|&i| informative(f.pixels.unit(i), floor))
+        .filter(|&i| informative(f.unit(i), floor))
         .count()
 }
 
 /// A frame with fewer informative samples (of every 21st) than this adds nothing: 0.05 % of
 /// them, and at least 10; a frame too small to judge (under 100 such samples) needs none.
-fn informative_needed(f: &Frame) -> usize {
-    let sampled = f.pixels.len().div_ceil(21);
+fn informative_needed(f: &Look<'_>) -> usize {
+    let sampled = f.len.div_ceil(21);
     if sampled < 100 {
         0
     } else {
@@ -568,7 +612,7 @@ impl Dark {
     /// peak (≤ [`PEDESTAL_MAX`], a third of the frame within ±3 codes of it), and the spread of
     /// its lower flank (where no picture lies: picture only adds light) as the noise. The
     /// caller's `black_level` (8-bit code, 0 = unknown) raises the pedestal when higher.
-    fn of(frames: &[Frame], floor: f32, black_level: u8) -> Dark {
+    fn of(frames: &[Look<'_>], floor: f32, black_level: u8) -> Dark {
         let floor = floor + BLACK_MARGIN;
         let mut pedestal = [floor; 3];
         let Some(darkest) = frames.first() else {
@@ -576,12 +620,12 @@ impl Dark {
         };
         for (c, p) in pedestal.iter_mut().enumerate() {
             let mut hist = [0usize; 256];
-            let n = darkest.pixels.len();
+            let n = darkest.len;
             let mut i = c;
             while i < n {
-                let code = match &darkest.pixels {
-                    Pixels::U8(v) => v[i],
-                    Pixels::U16(v) => bin16(v[i]),
+                let code = match darkest.pixels {
+                    Pixels::U8(v) => v[darkest.at(i)],
+                    Pixels::U16(v) => bin16(v[darkest.at(i)]),
                 };
                 hist[usize::from(code)] += 1;
                 i += 21;
@@ -655,8 +699,8 @@ struct PairCheck {
 const GRID: usize = 8;
 
 /// Compares two frames on the samples of every 7th pixel, in one pass over both.
-fn compare_pair(a: &Frame, b: &Frame, dark: &Dark) -> PairCheck {
-    let n = a.pixels.len().min(b.pixels.len());
+fn compare_pair(a: &Look<'_>, b: &Look<'_>, dark: &Dark) -> PairCheck {
+    let n = a.len.min(b.len);
     let (mut sa, mut sb, mut sad, mut count) = (0f64, 0f64, 0f64, 0usize);
     let (mut darker, mut brighter) = (0usize, 0usize);
     // Per block of an 8 × 8 grid and channel, the sums of both frames' samples.
@@ -668,7 +712,7 @@ fn compare_pair(a: &Frame, b: &Frame, dark: &Dark) -> PairCheck {
         let (x, y) = ((i / 3) % w, (i / 3) / w);
         let k = (y * GRID / h).min(GRID - 1) * GRID + (x * GRID / w).min(GRID - 1);
         for c in 0..3 {
-            let (va, vb) = (a.pixels.unit(i + c), b.pixels.unit(i + c));
+            let (va, vb) = (a.unit(i + c), b.unit(i + c));
             let d = vb - va;
             if d < -0.03 {
                 darker += 1;
@@ -721,5 +765,53 @@ fn compare_pair(a: &Frame, b: &Frame, dark: &Dark) -> PairCheck {
         identical,
         darker_when_longer: darker >= 100 && darker > brighter,
         other_scene: (same_order + reversed >= 100).then_some(3 * reversed > same_order + reversed),
+    }
+}
+
+/// How the checks read a frame: its samples `i = 21·k + c` (channel `c` of every 7th pixel),
+/// from the whole frame or from its [`thumbnail`], which holds exactly those.
+struct Look<'a> {
+    pixels: &'a Pixels,
+    /// The whole frame's sample count (`3 · width · height`).
+    len: usize,
+    width: usize,
+    height: usize,
+    thumb: bool,
+}
+
+impl<'a> Look<'a> {
+    fn of(f: &'a Frame, thumb: bool) -> Self {
+        Look {
+            pixels: &f.pixels,
+            len: match thumb {
+                true => 3 * f.width * f.height,
+                false => f.pixels.len(),
+            },
+            width: f.width,
+            height: f.height,
+            thumb,
+        }
+    }
+
+    /// Where the whole frame's sample `i` (channel of every 7th pixel) is held.
+    #[inline]
+    fn at(&self, i: usize) -> usize {
+        match self.thumb {
+            true => i / 21 * 3 + i % 21,
+            false => i,
+        }
+    }
+
+    /// The step through the held samples that is `whole` samples of the whole frame.
+    fn step(&self, whole: usize) -> usize {
+        match self.thumb {
+            true => whole / 7,
+            false => whole,
+        }
+    }
+
+    #[inline]
+    fn unit(&self, i: usize) -> f32 {
+        self.pixels.unit(self.at(i))
     }
 }

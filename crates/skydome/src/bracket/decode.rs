@@ -235,7 +235,7 @@ fn icc_description(icc: &[u8]) -> Option<String> {
     None
 }
 
-pub(super) fn orient(w: usize, h: usize, pixels: Pixels, o: u16) -> (usize, usize, Pixels) {
+pub(crate) fn orient(w: usize, h: usize, pixels: Pixels, o: u16) -> (usize, usize, Pixels) {
     fn go<T: Copy + Default>(w: usize, h: usize, src: &[T], o: u16) -> (usize, usize, Vec<T>) {
         let swap = o >= 5;
         let (ow, oh) = if swap { (h, w) } else { (w, h) };

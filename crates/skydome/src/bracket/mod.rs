@@ -34,6 +34,8 @@ mod times;
 
 pub use camera_raw::camera_raw_kind;
 pub use checks::{assemble, assemble_with_black_level};
+pub(crate) use checks::{assemble_thumbnails, every_7th_pixel};
+pub(crate) use decode::orient;
 pub use decode::{check_jpeg_complete, decode, decode_raw};
 pub use dng::{is_dng, RawColour};
 pub use exif::{

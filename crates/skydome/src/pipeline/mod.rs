@@ -30,6 +30,7 @@ mod options;
 mod progress;
 mod report;
 mod sky_stage;
+mod stream;
 
 use std::ops::ControlFlow;
 
@@ -61,6 +62,7 @@ pub use progress::{no_progress, Progress, Stage};
 pub use report::{Dome, ErrorSummary, FrameSummary, RawReport, Report};
 pub use sky_stage::{GeometryReport, NorthFromSun, SunSource};
 use sky_stage::{SkyOutcome, SkyResult};
+pub use stream::{decoded_size, streams, streams_input};
 
 /// Errors of [`run`]: the stage's own error, or cancellation.
 #[derive(Debug, thiserror::Error)]
@@ -139,20 +141,41 @@ pub fn run(
 ) -> Result<Dome, PipelineError> {
     let mut progress = Reporter(progress);
     check_options(options)?;
-    let (mut br, raw) = read_bracket(input, options.black_level, &mut progress)?;
-    let alignment = options.align.then(|| align_frames(&mut br));
-    let lens = lens_stage(&options.lens, &br, &mut progress)?;
+    // A plain crop of a bracket of encoded photos is read one frame at a time (see
+    // `stream`); otherwise, and whenever that path meets anything unusual, the whole frames.
+    let (mut br, raw, alignment, lens, calibrated, mut prepared) =
+        match stream::intake(&input, options, &mut progress)? {
+            Some(s) => (s.br, None, None, s.lens, s.calibrated, Some(s.prepared)),
+            None => {
+                let (mut br, raw) = read_bracket(input, options.black_level, &mut progress)?;
+                let alignment = options.align.then(|| align_frames(&mut br));
+                let lens = lens_stage(&options.lens, &br, &mut progress)?;
+                let lens_circle = lens.as_ref().map(|(l, _)| l.circle);
+                let calibrated = match &raw {
+                    Some(_) => linear_response(),
+                    None => response_stage(options, &br, lens_circle, &mut progress)?,
+                };
+                (br, raw, alignment, lens, calibrated, None)
+            }
+        };
     let lens_circle = lens.as_ref().map(|(l, _)| l.circle);
     let lens_profile = lens.as_ref().map(|(l, _)| l.clone());
-    let calibrated = match &raw {
-        Some(_) => linear_response(),
-        None => response_stage(options, &br, lens_circle, &mut progress)?,
-    };
     let (constant, absolute_warnings) =
         absolute::scale_without_reading(options, &br, &calibrated.response, raw.is_some())?;
-    let window = lens
-        .as_ref()
-        .and_then(|(l, _)| merge_window(options, l, &br, raw.is_some() || constant.is_some()));
+    let whole_frames = prepared.is_some() || frames_are_whole(&br);
+    let window = lens.as_ref().and_then(|(l, _)| {
+        merge_window(
+            options,
+            l,
+            (br.width(), br.height()),
+            whole_frames,
+            raw.is_some() || constant.is_some(),
+        )
+    });
+    if window.is_none() {
+        // The streamed intake merges only the window its options imply.
+        prepared = None;
+    }
     let MergeOutcome {
         mut merged,
         inconsistent_fraction,
@@ -168,6 +191,7 @@ pub fn run(
             &calibrated.response,
             lens_circle,
             window,
+            prepared,
             &mut progress,
         )?,
     };
@@ -338,26 +362,31 @@ fn response_stage(
             warnings: Vec::new(),
         },
         ResponseSource::Calibrate(o) => {
-            let cal = response::calibrate(&br.frames, circle, o)?;
-            let sampling = cal.report().clone();
-            let warnings = [
-                sampling.relaxed_warning(),
-                sampling.shortfall_warning(),
-                sampling.range_warning(),
-            ];
-            let mut profile = CameraProfile::from_calibration(&cal);
-            describe_camera(&mut profile, br);
-            Calibrated {
-                response: cal.response,
-                profile: Some(profile),
-                warnings: warnings.into_iter().flatten().collect(),
-                sampling: Some(sampling),
-                from: "calibrated on this bracket",
-            }
+            calibrated_on(response::calibrate(&br.frames, circle, o)?, br)
         }
     };
     progress.at(Stage::Calibrating, 1.0)?;
     Ok(calibrated)
+}
+
+/// What a calibration on this bracket gives the run: its response, the profile made from it
+/// (described from the bracket's EXIF), the sampling report and its warnings.
+fn calibrated_on(cal: response::Calibration, br: &Bracket) -> Calibrated {
+    let sampling = cal.report().clone();
+    let warnings = [
+        sampling.relaxed_warning(),
+        sampling.shortfall_warning(),
+        sampling.range_warning(),
+    ];
+    let mut profile = CameraProfile::from_calibration(&cal);
+    describe_camera(&mut profile, br);
+    Calibrated {
+        response: cal.response,
+        profile: Some(profile),
+        warnings: warnings.into_iter().flatten().collect(),
+        sampling: Some(sampling),
+        from: "calibrated on this bracket",
+    }
 }
 
 /// What the merge stage found.
@@ -385,14 +414,22 @@ pub const CEILING_CODE: u8 = 250;
 /// The pixels of the shortest frame of `frames` (shortest first) that read at least
 /// [`CEILING_CODE`] in some channel; empty for 16-bit frames, which have no JPEG ringing.
 fn shortest_at_ceiling(frames: &[bracket::Frame]) -> Vec<u32> {
-    match frames.first().map(|f| &f.pixels) {
-        Some(bracket::Pixels::U8(v)) => v
+    frames
+        .first()
+        .map_or_else(Vec::new, |f| at_ceiling(&f.pixels))
+}
+
+/// The pixels of `p` (the shortest frame) at [`CEILING_CODE`] or above in some channel; empty
+/// for 16-bit pixels.
+fn at_ceiling(p: &bracket::Pixels) -> Vec<u32> {
+    match p {
+        bracket::Pixels::U8(v) => v
             .chunks_exact(3)
             .enumerate()
             .filter(|(_, p)| p.iter().any(|&c| c >= CEILING_CODE))
             .map(|(i, _)| i as u32)
             .collect(),
-        _ => Vec::new(),
+        bracket::Pixels::U16(_) => Vec::new(),
     }
 }
 
@@ -479,6 +516,7 @@ fn merge_stage(
     response: &Response,
     lens_circle: Option<Circle>,
     window: Option<Window>,
+    prepared: Option<stream::Prepared>,
     progress: &mut Reporter<'_>,
 ) -> Result<MergeOutcome, PipelineError> {
     progress.at(Stage::Merging, 0.0)?;
@@ -496,9 +534,10 @@ fn merge_stage(
         .iter()
         .map(|f| f.exposure.relative().ln())
         .collect();
-    let at_ceiling = match lens_circle {
-        Some(_) => shortest_at_ceiling(&br.frames),
-        None => Vec::new(),
+    let at_ceiling = match (lens_circle, &prepared) {
+        (Some(_), Some(p)) => p.at_ceiling.clone(),
+        (Some(_), None) => shortest_at_ceiling(&br.frames),
+        (None, _) => Vec::new(),
     };
     let merge_options = MergeOptions {
         weighting: options.weighting,
@@ -510,13 +549,21 @@ fn merge_stage(
         consistency: options.consistency || options.ghosts || options.products.consistency,
         ghosts: options.ghosts,
     };
-    let (merged, mut warnings) = match window {
-        None => {
+    let (merged, mut warnings) = match (window, prepared) {
+        (Some(_), Some(p)) => merge_parts(
+            p.parts,
+            p.flags,
+            (br.width(), br.height()),
+            response,
+            &merge_options,
+            lens_circle.as_ref(),
+        )?,
+        (None, _) => {
             let merged = merge::merge_releasing(&mut br.frames, response, &merge_options)?;
             let warnings = merged.warnings(lens_circle.as_ref());
             (merged, warnings)
         }
-        Some(w) => merge_in_window(
+        (Some(w), None) => merge_in_window(
             &mut br.frames,
             w,
             response,
@@ -575,26 +622,17 @@ struct Window {
 /// noise-aware merge, whose noise fit reads the whole bracket). `whole` is true for a RAW
 /// bracket or an absolute scale without a reading (merged whole). The merged pixels are the
 /// same either way; a 12 MP phone dome's radiance shrinks from 144 to about 49 MB.
-fn merge_window(o: &Options, lens: &LensProfile, br: &Bracket, whole: bool) -> Option<Window> {
-    let plain = !whole
-        && o.sky.crop
-        && o.sky.level.is_none()
-        && !o.sky.north_from_sun
-        && lens.vignetting.is_none()
-        && o.reference.is_empty()
-        && !o.products.confidence
-        && !o.products.consistency
-        && !o.consistency
-        && !o.ghosts
-        && o.weighting != merge::Weighting::Noise;
+fn merge_window(
+    o: &Options,
+    lens: &LensProfile,
+    (w, h): (usize, usize),
+    whole_frames: bool,
+    whole: bool,
+) -> Option<Window> {
+    let plain = !whole && plain_crop(o) && lens.vignetting.is_none();
     if !plain {
         return None;
     }
-    let (w, h) = (br.width(), br.height());
-    let whole_frames = br
-        .frames
-        .iter()
-        .all(|f| (f.width, f.height, f.pixels.len()) == (w, h, 3 * w * h));
     let (ox, oy, n, _) = fisheye::dome_crop_box(lens, o.sky.fov_out_deg).ok()?;
     let clamp = |v: i64, max: usize| v.clamp(0, max as i64) as usize;
     let (x0, y0) = (clamp(ox, w), clamp(oy, h));
@@ -607,6 +645,28 @@ fn merge_window(o: &Options, lens: &LensProfile, br: &Bracket, whole: bool) -> O
     };
     (whole_frames && win.width > 0 && win.height > 0 && win.width * win.height < w * h)
         .then_some(win)
+}
+
+/// Whether every frame of `br` holds its whole picture (`3 · width · height` samples).
+fn frames_are_whole(br: &Bracket) -> bool {
+    let (w, h) = (br.width(), br.height());
+    br.frames
+        .iter()
+        .all(|f| (f.width, f.height, f.pixels.len()) == (w, h, 3 * w * h))
+}
+
+/// The options' part of [`merge_window`]'s rule: a plain crop to the dome is the first reader
+/// of the merged pixels (the lens's vignetting is the other part).
+fn plain_crop(o: &Options) -> bool {
+    o.sky.crop
+        && o.sky.level.is_none()
+        && !o.sky.north_from_sun
+        && o.reference.is_empty()
+        && !o.products.confidence
+        && !o.products.consistency
+        && !o.consistency
+        && !o.ghosts
+        && o.weighting != merge::Weighting::Noise
 }
 
 /// The merge of `frames`' `window` alone, each frame's pixels given back once its part is
@@ -622,7 +682,20 @@ fn merge_in_window(
 ) -> Result<(Merged, Vec<String>), PipelineError> {
     let (w, h) = frames.first().map_or((0, 0), |f| (f.width, f.height));
     let flags = merge::clipped_flags(frames, opts.black_level);
-    let mut parts: Vec<bracket::Frame> = frames.iter_mut().map(|f| window_of(f, window)).collect();
+    let parts: Vec<bracket::Frame> = frames.iter_mut().map(|f| window_of(f, window)).collect();
+    merge_parts(parts, flags, (w, h), response, opts, area)
+}
+
+/// The merge of `parts` (the frames' window) with the whole photo's `flags` (of a `w × h`
+/// photo), as [`merge_in_window`] describes.
+fn merge_parts(
+    mut parts: Vec<bracket::Frame>,
+    flags: merge::ClippedFlags,
+    (w, h): (usize, usize),
+    response: &Response,
+    opts: &MergeOptions,
+    area: Option<&Circle>,
+) -> Result<(Merged, Vec<String>), PipelineError> {
     let part = merge::merge_releasing(
         &mut parts,
         response,
@@ -658,6 +731,19 @@ fn merge_in_window(
 /// `f`'s pixels inside `window` as a frame of their own (same name and exposure); `f`'s pixel
 /// buffer is given back (its size, name and exposure are kept).
 fn window_of(f: &mut bracket::Frame, window: Window) -> bracket::Frame {
+    let pixels = window_pixels(&f.pixels, f.width, window);
+    f.pixels.release_from(0);
+    bracket::Frame {
+        name: f.name.clone(),
+        width: window.width,
+        height: window.height,
+        pixels,
+        exposure: f.exposure,
+    }
+}
+
+/// The pixels of `p` (a frame `width` pixels wide) inside `window`.
+fn window_pixels(p: &bracket::Pixels, width: usize, window: Window) -> bracket::Pixels {
     fn rows<T: Copy>(v: &[T], width: usize, win: Window) -> Vec<T> {
         let mut out = Vec::with_capacity(3 * win.width * win.height);
         for y in win.y..win.y + win.height {
@@ -666,17 +752,9 @@ fn window_of(f: &mut bracket::Frame, window: Window) -> bracket::Frame {
         }
         out
     }
-    let pixels = match &f.pixels {
-        bracket::Pixels::U8(v) => bracket::Pixels::U8(rows(v, f.width, window)),
-        bracket::Pixels::U16(v) => bracket::Pixels::U16(rows(v, f.width, window)),
-    };
-    f.pixels.release_from(0);
-    bracket::Frame {
-        name: f.name.clone(),
-        width: window.width,
-        height: window.height,
-        pixels,
-        exposure: f.exposure,
+    match p {
+        bracket::Pixels::U8(v) => bracket::Pixels::U8(rows(v, width, window)),
+        bracket::Pixels::U16(v) => bracket::Pixels::U16(rows(v, width, window)),
     }
 }
 
@@ -987,15 +1065,15 @@ fn lens_stage(
     progress: &mut Reporter<'_>,
 ) -> Result<Option<(LensProfile, Option<CircleFit>)>, PipelineError> {
     progress.at(Stage::Lens, 0.0)?;
-    let lens = lens_of(src, br)?;
+    let lens = lens_of(src, || detect_circle(br))?;
     progress.at(Stage::Lens, 1.0)?;
     Ok(lens)
 }
 
-/// The lens profile of `src` and, when the circle was detected, the fit.
+/// The lens profile of `src` and, when the circle was detected (by `detect`), the fit.
 fn lens_of(
     src: &LensSource,
-    br: &Bracket,
+    detect: impl FnOnce() -> Result<CircleFit, PipelineError>,
 ) -> Result<Option<(LensProfile, Option<CircleFit>)>, PipelineError> {
     match src {
         LensSource::None => Ok(None),
@@ -1011,7 +1089,7 @@ fn lens_of(
             let (c, fit) = match circle {
                 Some(c) => (*c, None),
                 None => {
-                    let fit = detect_circle(br)?;
+                    let fit = detect()?;
                     (fit.circle, Some(fit))
                 }
             };
@@ -1110,12 +1188,14 @@ mod tests {
             },
             ..Options::default()
         };
-        let w = merge_window(&crop, &lens, &br, false).expect("a window");
+        let size = (br.width(), br.height());
+        let w = merge_window(&crop, &lens, size, true, false).expect("a window");
         assert!(
             w.width < 360 && w.width == w.height && w.x > 0 && w.y > 0,
             "{w:?}"
         );
-        assert_eq!(merge_window(&crop, &lens, &br, true), None);
+        assert_eq!(merge_window(&crop, &lens, size, true, true), None);
+        assert_eq!(merge_window(&crop, &lens, size, false, false), None);
         let mut off = Vec::new();
         for f in [
             |o: &mut Options| o.sky.crop = false,
@@ -1129,7 +1209,7 @@ mod tests {
         ] {
             let mut o = crop.clone();
             f(&mut o);
-            off.push(merge_window(&o, &lens, &br, false));
+            off.push(merge_window(&o, &lens, size, true, false));
         }
         assert!(off.iter().all(Option::is_none), "{off:?}");
     }

@@ -247,6 +247,16 @@ pub struct Options {
     /// Where an absolute scale comes from when no measurement is given (a measurement in
     /// [`Options::reference`] always wins).
     pub absolute: AbsoluteMode,
+    /// The most memory, in bytes, the bracket's photos may take decoded at once: a resource
+    /// policy, not an image decision (the output is the same bytes either way). `None` (the
+    /// default, the command line's and Python's): no limit, every photo is decoded whole,
+    /// the fastest way. With a budget, a bracket of encoded 8-bit photos whose decoded size
+    /// (frames × width × height × 3 bytes, from the files' headers) exceeds it is read one
+    /// photo at a time when the job allows ([`super::streams`]: a plain crop to the dome),
+    /// at the cost of decoding each photo twice; a web page sets one (a phone's browser tab
+    /// is killed near 1 GB; nine 12 MP photos are 324 MB decoded). See
+    /// [`super::streams_input`].
+    pub frame_memory_budget: Option<u64>,
 }
 
 /// Where the absolute scale comes from without a meter reading.

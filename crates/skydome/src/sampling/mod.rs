@@ -496,8 +496,227 @@ pub fn sample(
     if opts.histogram {
         return histogram::sample_histogram(frames, circle, opts);
     }
+    let size = check_frames(frames)?;
+    let whole = Whole { frames, size };
+    match sample_from(&whole, size, circle, opts)? {
+        Ok(s) => Ok(s),
+        // Unreachable: the whole frames answer every read.
+        Err(Missing(_)) => Err(SamplingError::NoFrames),
+    }
+}
+
+/// Where sampling reads the bracket (sorted shortest exposure first): every frame's patch
+/// means and 3 × 3 spread at a position. The whole frames ([`Whole`]), or the values gathered
+/// at planned positions while the frames were decoded one at a time ([`Gathered`]).
+pub(crate) trait Source: Sync {
+    /// Number of frames.
+    fn frames(&self) -> usize;
+    /// The means of the `(2r+1)²` patch at `(x, y)` of every frame into `out` (one per frame);
+    /// false when they are not at hand.
+    fn means(&self, x: usize, y: usize, r: usize, out: &mut [[f32; 3]]) -> bool;
+    /// Whether some frame's 3 × 3 variance at `(x, y)` exceeds `thr2` in some channel; `None`
+    /// when it is not at hand.
+    fn edge(&self, x: usize, y: usize, thr2: f32) -> Option<bool>;
+}
+
+/// Positions a [`Source`] did not have: sampling stopped there, and goes the same way again
+/// once they are gathered.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Missing(pub Vec<(usize, usize)>);
+
+/// The whole frames as a [`Source`].
+struct Whole<'a> {
+    frames: &'a [Frame],
+    size: (usize, usize),
+}
+
+impl Source for Whole<'_> {
+    fn frames(&self) -> usize {
+        self.frames.len()
+    }
+
+    fn means(&self, x: usize, y: usize, r: usize, out: &mut [[f32; 3]]) -> bool {
+        let (w, h) = self.size;
+        for (s, f) in out.iter_mut().zip(self.frames) {
+            *s = patch_mean(&f.pixels, x, y, w, h, r);
+        }
+        true
+    }
+
+    fn edge(&self, x: usize, y: usize, thr2: f32) -> Option<bool> {
+        let (w, h) = self.size;
+        Some(
+            self.frames
+                .iter()
+                .any(|f| spread3(&f.pixels, x, y, w, h).iter().any(|&v| v > thr2)),
+        )
+    }
+}
+
+/// Per channel, the variance of the 3 × 3 neighbourhood of `(x, y)` (clamped at the frame
+/// border) as the edge test computes it.
+fn spread3(p: &Pixels, x: usize, y: usize, w: usize, h: usize) -> [f32; 3] {
+    let (mut s, mut s2, mut n) = ([0f32; 3], [0f32; 3], 0f32);
+    for yy in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+        for xx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+            let v = code_f(p, 3 * (yy * w + xx));
+            for c in 0..3 {
+                s[c] += v[c];
+                s2[c] += v[c] * v[c];
+            }
+            n += 1.0;
+        }
+    }
+    let mut out = [0f32; 3];
+    for c in 0..3 {
+        let mean = s[c] / n;
+        out[c] = s2[c] / n - mean * mean;
+    }
+    out
+}
+
+/// Every frame's patch means and 3 × 3 spreads at a set of positions, gathered frame by frame
+/// (see [`plan`]), as a [`Source`].
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Gathered {
+    /// Positions `(y, x)`, sorted.
+    keys: Vec<(usize, usize)>,
+    frames: usize,
+    patch: usize,
+    size: (usize, usize),
+    /// Per key and frame, the patch means.
+    means: Vec<[f32; 3]>,
+    /// Per key, the largest 3 × 3 variance of any channel and frame (all the edge test asks).
+    spread: Vec<f32>,
+}
+
+impl Gathered {
+    /// Room for `positions` (`(x, y)`) of `frames` frames of `size`, patch radius `patch`.
+    pub(crate) fn new(
+        positions: &[(usize, usize)],
+        frames: usize,
+        patch: usize,
+        size: (usize, usize),
+    ) -> Self {
+        let mut keys: Vec<(usize, usize)> = positions
+            .iter()
+            .filter(|&&(x, y)| x < size.0 && y < size.1)
+            .map(|&(x, y)| (y, x))
+            .collect();
+        keys.sort_unstable();
+        keys.dedup();
+        Gathered {
+            means: vec![[0f32; 3]; keys.len() * frames],
+            spread: vec![f32::NEG_INFINITY; keys.len()],
+            keys,
+            frames,
+            patch,
+            size,
+        }
+    }
+
+    /// Reads frame `j` (of the bracket's order) at every position.
+    pub(crate) fn add_frame(&mut self, j: usize, p: &Pixels) {
+        let (w, h) = self.size;
+        let (frames, r) = (self.frames, self.patch);
+        for (k, &(y, x)) in self.keys.iter().enumerate() {
+            self.means[k * frames + j] = patch_mean(p, x, y, w, h, r);
+            let s = spread3(p, x, y, w, h);
+            self.spread[k] = self.spread[k].max(s[0]).max(s[1]).max(s[2]);
+        }
+    }
+
+    fn find(&self, x: usize, y: usize) -> Option<usize> {
+        self.keys.binary_search(&(y, x)).ok()
+    }
+}
+
+/// Several [`Gathered`] sets, read in turn.
+impl Source for Vec<Gathered> {
+    fn frames(&self) -> usize {
+        self.first().map_or(0, |g| g.frames)
+    }
+
+    fn means(&self, x: usize, y: usize, r: usize, out: &mut [[f32; 3]]) -> bool {
+        for g in self.iter().filter(|g| g.patch == r) {
+            if let Some(k) = g.find(x, y) {
+                out.copy_from_slice(&g.means[k * g.frames..(k + 1) * g.frames]);
+                return true;
+            }
+        }
+        false
+    }
+
+    fn edge(&self, x: usize, y: usize, thr2: f32) -> Option<bool> {
+        // `v > thr2` for some variance `v` is `max > thr2` (none is NaN: codes are finite).
+        self.iter()
+            .find_map(|g| g.find(x, y).map(|k| g.spread[k] > thr2))
+    }
+}
+
+/// The positions sampling of a `size` bracket of `frames` frames will read, as far as they
+/// are known before reading any: the lattice of the stratified draw and of the code bands, and
+/// every position the grid draw can reach while it meets the cells' quotas (whatever is
+/// accepted, so for every relaxation). The top-up after the quotas depends on what was
+/// accepted; sampling asks for its positions ([`Missing`]) when it gets there.
+pub(crate) fn plan(
+    size: (usize, usize),
+    frames: usize,
+    circle: Option<Circle>,
+    opts: &SampleOptions,
+) -> Result<Vec<(usize, usize)>, SamplingError> {
+    opts.validate()?;
+    let (w, h) = size;
+    let area = usable_area(circle, w, h)?;
+    let target = target_count(opts, frames);
+    let mut rng = SplitMix64::new(opts.seed);
+    let quota = cell_quotas(opts.grid, target, &mut rng);
+    let inside = |x: usize, y: usize| circle.is_none_or(|c| c.contains_pixel(x, y));
+    let mut out = Vec::new();
+    if opts.stratify > 0 {
+        out.extend(lattice_points(size, circle, LATTICE_POINTS));
+        return Ok(out);
+    }
+    if opts.code_bands > 0 {
+        out.extend(lattice_points(size, circle, GRID_LATTICE_POINTS));
+    }
+    // Cell k starts after between `lo` and `hi` draws (each takes two numbers), and makes
+    // between its quota and 32 times it.
+    let most: usize = quota.iter().map(|q| q * ATTEMPTS_PER_SAMPLE).sum();
+    let stream: Vec<u64> = (0..2 * most).map(|_| rng.next_u64()).collect();
+    let below = |u: u64, n: usize| ((u as u128 * n as u128) >> 64) as usize;
+    let (mut lo, mut hi) = (0usize, 0usize);
+    for (cell, &q) in quota.iter().enumerate() {
+        let (cx0, cx1, cy0, cy1) = cell_bounds(area, opts.grid, cell);
+        if q == 0 || cx1 <= cx0 || cy1 <= cy0 {
+            continue;
+        }
+        for t in lo..(hi + q * ATTEMPTS_PER_SAMPLE).min(most) {
+            let x = cx0 + below(stream[2 * t], cx1 - cx0);
+            let y = cy0 + below(stream[2 * t + 1], cy1 - cy0);
+            if inside(x, y) {
+                out.push((x, y));
+            }
+        }
+        lo += q;
+        hi += q * ATTEMPTS_PER_SAMPLE;
+    }
+    Ok(out)
+}
+
+/// Chooses calibration samples from `src` (frames of `size`), as [`sample`] does.
+pub(crate) fn sample_from(
+    src: &dyn Source,
+    size: (usize, usize),
+    circle: Option<Circle>,
+    opts: &SampleOptions,
+) -> Result<Result<Samples, Missing>, SamplingError> {
+    opts.validate()?;
     let mut o = opts.clone();
-    let mut out = sample_once(frames, circle, &o)?;
+    let mut out = match sample_once(src, size, circle, &o)? {
+        Ok(s) => s,
+        Err(m) => return Ok(Err(m)),
+    };
     // Noisy frames (a small sensor, many frames, 1-EV steps) fail the edge and monotonicity
     // tests by noise alone: fewer than half the samples survive, or none. The thresholds are
     // then doubled, up to twice (edge 32 codes, monotonic 16 codes from the defaults), and the
@@ -507,7 +726,10 @@ pub fn sample(
         relaxed += 1;
         o.edge_threshold *= 2.0;
         o.monotonic_tolerance = o.monotonic_tolerance.saturating_mul(2);
-        let again = sample_once(frames, circle, &o)?;
+        let again = match sample_once(src, size, circle, &o)? {
+            Ok(s) => s,
+            Err(m) => return Ok(Err(m)),
+        };
         if again.report.used > out.report.used {
             out = again;
             out.report.relaxed = relaxed;
@@ -519,7 +741,7 @@ pub fn sample(
         out.report.edge_threshold = opts.edge_threshold;
         out.report.monotonic_tolerance = opts.monotonic_tolerance;
     }
-    Ok(out)
+    Ok(Ok(out))
 }
 
 /// How many times [`sample`] doubles the edge and monotonicity thresholds when too few samples
@@ -529,12 +751,12 @@ pub const MAX_RELAXATIONS: u32 = 2;
 /// One sampling pass with the thresholds in `opts`: the area, each grid cell's quota, draws
 /// until the quotas are met, a top-up when candidates were rejected, and the code bands.
 fn sample_once(
-    frames: &[Frame],
+    src: &dyn Source,
+    (w, h): (usize, usize),
     circle: Option<Circle>,
     opts: &SampleOptions,
-) -> Result<Samples, SamplingError> {
-    let (w, h) = check_frames(frames)?;
-    let p = frames.len();
+) -> Result<Result<Samples, Missing>, SamplingError> {
+    let p = src.frames();
     let area = usable_area(circle, w, h)?;
     let target = target_count(opts, p);
     let mut rng = SplitMix64::new(opts.seed);
@@ -548,10 +770,10 @@ fn sample_once(
         ..SampleReport::default()
     };
     let mut draw = Draws {
-        frames,
+        src,
+        missing: None,
         circle,
         opts,
-        size: (w, h),
         area,
         report,
         positions: Vec::with_capacity(target),
@@ -561,13 +783,16 @@ fn sample_once(
     };
     let mut lattice = None;
     if opts.stratify > 0 {
-        let lat = Lattice::new(frames, circle, opts, (w, h), &mut rng, LATTICE_POINTS);
+        let lat = match Lattice::new(src, circle, opts, (w, h), &mut rng, LATTICE_POINTS) {
+            Ok(l) => l,
+            Err(m) => return Ok(Err(m)),
+        };
         draw.stratified(&lat, target);
         draw.report.stratified = draw.positions.len();
         lattice = Some(lat);
     } else {
         draw.meet_quotas(&quota, &mut rng);
-        if opts.reject {
+        if opts.reject && draw.missing.is_none() {
             draw.top_up(target, &mut rng);
         }
     }
@@ -575,33 +800,36 @@ fn sample_once(
         mut report,
         mut positions,
         mut values,
+        missing,
         ..
     } = draw;
+    if let Some(m) = missing {
+        return Ok(Err(Missing(m)));
+    }
     if opts.code_bands > 0 {
         // After a grid draw the lattice is drawn here, with the generator where the grid left
         // it, as before the stratified draw existed (the grid method's samples are unchanged).
         let lat = match lattice {
             Some(l) => l,
-            None => Lattice::new(frames, circle, opts, (w, h), &mut rng, GRID_LATTICE_POINTS),
+            None => match Lattice::new(src, circle, opts, (w, h), &mut rng, GRID_LATTICE_POINTS) {
+                Ok(l) => l,
+                Err(m) => return Ok(Err(m)),
+            },
         };
-        report.band_samples = fill_bands(
-            frames,
-            &lat,
-            opts,
-            (w, h),
-            &mut report,
-            &mut positions,
-            &mut values,
-        );
+        report.band_samples =
+            match fill_bands(src, &lat, opts, &mut report, &mut positions, &mut values) {
+                Ok(n) => n,
+                Err(m) => return Ok(Err(m)),
+            };
     }
     report.used = positions.len();
     report.code_range = code_range(&values);
-    Ok(Samples {
+    Ok(Ok(Samples {
         positions,
         values,
         frames: p,
         report,
-    })
+    }))
 }
 
 /// The usable area's bounding square `(x0, y0, x1, y1)`, clipped to the `w × h` frame: the
@@ -666,6 +894,8 @@ fn cell_quotas(grid: usize, target: usize, rng: &mut SplitMix64) -> Vec<usize> {
 enum Refusal {
     /// Outside the image circle (not a judgement of the content).
     Outside,
+    /// The source does not have the position's values.
+    Missing,
     /// Already taken.
     Taken,
     /// Failed a content test.
@@ -674,10 +904,11 @@ enum Refusal {
 
 /// The draws of one sampling pass: what has been taken so far, and the report.
 struct Draws<'a> {
-    frames: &'a [Frame],
+    src: &'a dyn Source,
+    /// Positions the source did not have, when sampling stopped for them.
+    missing: Option<Vec<(usize, usize)>>,
     circle: Option<Circle>,
     opts: &'a SampleOptions,
-    size: (usize, usize),
     /// `(x0, y0, x1, y1)` of [`usable_area`].
     area: (usize, usize, usize, usize),
     report: SampleReport,
@@ -699,6 +930,9 @@ impl Draws<'_> {
                 if self.try_cell(cell, rng) {
                     got[cell] += 1;
                 }
+                if self.missing.is_some() {
+                    return;
+                }
             }
         }
     }
@@ -712,6 +946,24 @@ impl Draws<'_> {
         while self.positions.len() < target && budget > 0 {
             budget -= 1;
             self.try_cell(cell, rng);
+            if let Some(mut m) = self.missing.take() {
+                // What the rest of the top-up can draw, whatever it accepts.
+                let mut rng = rng.clone();
+                for _ in 0..budget {
+                    cell = (cell + 1) % cells;
+                    let (cx0, cx1, cy0, cy1) = self.cell_bounds(cell);
+                    if cx1 <= cx0 || cy1 <= cy0 {
+                        continue;
+                    }
+                    let x = cx0 + rng.below(cx1 - cx0);
+                    let y = cy0 + rng.below(cy1 - cy0);
+                    if self.circle.is_none_or(|c| c.contains_pixel(x, y)) {
+                        m.push((x, y));
+                    }
+                }
+                self.missing = Some(m);
+                return;
+            }
             cell = (cell + 1) % cells;
         }
     }
@@ -719,16 +971,7 @@ impl Draws<'_> {
     /// Cell `k`'s pixel span `(x0, x1, y0, y1)`: `[x0 + k·aw/G, x0 + (k+1)·aw/G)` across,
     /// likewise down; empty when the area is narrower than `G` pixels.
     fn cell_bounds(&self, cell: usize) -> (usize, usize, usize, usize) {
-        let g = self.opts.grid;
-        let (cx, cy) = (cell % g, cell / g);
-        let (x0, y0, x1, y1) = self.area;
-        let (aw, ah) = (x1 - x0, y1 - y0);
-        (
-            x0 + cx * aw / g,
-            x0 + (cx + 1) * aw / g,
-            y0 + cy * ah / g,
-            y0 + (cy + 1) * ah / g,
-        )
+        cell_bounds(self.area, self.opts.grid, cell)
     }
 
     /// Draws one position in `cell` and keeps it when it passes; true when kept.
@@ -749,6 +992,10 @@ impl Draws<'_> {
                 let r = &mut self.report;
                 match refusal {
                     Refusal::Outside => r.outside_circle += 1,
+                    Refusal::Missing => {
+                        self.missing = Some(vec![(x, y)]);
+                        return false;
+                    }
                     Refusal::Taken => {}
                     Refusal::Rejected(Reject::Clipped) => r.rejected_clipped += 1,
                     Refusal::Rejected(Reject::Edge) => r.rejected_edge += 1,
@@ -761,7 +1008,6 @@ impl Draws<'_> {
 
     /// Reads the patch means at `(x, y)` into the scratch values and judges the position.
     fn judge(&mut self, x: usize, y: usize) -> Result<(), Refusal> {
-        let (w, h) = self.size;
         let opts = self.opts;
         if let Some(c) = self.circle {
             if !c.contains_pixel(x, y) {
@@ -771,12 +1017,20 @@ impl Draws<'_> {
         if opts.reject && !self.taken.insert((x, y)) {
             return Err(Refusal::Taken);
         }
-        for (s, f) in self.scratch.iter_mut().zip(self.frames) {
-            *s = patch_mean(&f.pixels, x, y, w, h, opts.patch);
+        if !self.src.means(x, y, opts.patch, &mut self.scratch) {
+            if opts.reject {
+                self.taken.remove(&(x, y));
+            }
+            return Err(Refusal::Missing);
         }
         if opts.reject {
-            if let Some(reason) = reject_reason(self.frames, &self.scratch, x, y, w, h, opts) {
-                return Err(Refusal::Rejected(reason));
+            match reject_reason(self.src, &self.scratch, x, y, opts) {
+                Err(Missing(_)) => {
+                    self.taken.remove(&(x, y));
+                    return Err(Refusal::Missing);
+                }
+                Ok(Some(reason)) => return Err(Refusal::Rejected(reason)),
+                Ok(None) => {}
             }
         }
         Ok(())
@@ -813,40 +1067,46 @@ struct Lattice {
 
 impl Lattice {
     fn new(
-        frames: &[Frame],
+        src: &dyn Source,
         circle: Option<Circle>,
         opts: &SampleOptions,
         (w, h): (usize, usize),
         rng: &mut SplitMix64,
         points: usize,
-    ) -> Self {
-        let step = ((w * h) as f64 / points as f64).sqrt().max(1.0) as usize;
-        let cand: Vec<(usize, usize)> = (0..h)
-            .step_by(step)
-            .flat_map(|y| (0..w).step_by(step).map(move |x| (x, y)))
-            .filter(|&(x, y)| circle.is_none_or(|c| c.contains_pixel(x, y)))
-            .collect();
+    ) -> Result<Self, Missing> {
+        let cand = lattice_points((w, h), circle, points);
+        let p = src.frames();
         // Every candidate's patch means, computed in lattice (memory) order: visited in the
         // random order they cost a cache miss per patch row and frame, about 40 ms on a 6 MP
         // bracket; in memory order, a few.
         let means_at = |&(x, y): &(usize, usize)| {
-            frames
-                .iter()
-                .map(move |f| patch_mean(&f.pixels, x, y, w, h, opts.patch))
+            let mut m = vec![[0f32; 3]; p];
+            src.means(x, y, opts.patch, &mut m).then_some(m)
         };
         #[cfg(feature = "parallel")]
-        let means: Vec<[f32; 3]> = {
+        let per: Vec<Option<Vec<[f32; 3]>>> = {
             use rayon::prelude::*;
-            cand.par_iter().flat_map_iter(means_at).collect()
+            cand.par_iter().map(means_at).collect()
         };
         #[cfg(not(feature = "parallel"))]
-        let means: Vec<[f32; 3]> = cand.iter().flat_map(means_at).collect();
+        let per: Vec<Option<Vec<[f32; 3]>>> = cand.iter().map(means_at).collect();
+        let mut means = Vec::with_capacity(cand.len() * p);
+        let mut missing = Vec::new();
+        for (m, &xy) in per.into_iter().zip(&cand) {
+            match m {
+                Some(m) => means.extend_from_slice(&m),
+                None => missing.push(xy),
+            }
+        }
+        if !missing.is_empty() {
+            return Err(Missing(missing));
+        }
         let mut order: Vec<usize> = (0..cand.len()).collect();
         for i in (1..order.len()).rev() {
             let j = rng.below(i + 1);
             order.swap(i, j);
         }
-        Self { cand, means, order }
+        Ok(Self { cand, means, order })
     }
 
     /// Candidate `k`'s patch means, one per frame.
@@ -859,7 +1119,7 @@ impl Draws<'_> {
     /// The stratified draw ([`SampleOptions::stratify`]): the lattice's candidates in bands of
     /// the middle frame's mean code, taken one band after another until `target` are kept.
     fn stratified(&mut self, lat: &Lattice, target: usize) {
-        let p = self.frames.len();
+        let p = self.src.frames();
         let mid = p / 2;
         let nb = self.opts.stratify.clamp(1, 256);
         let mut bands: Vec<Vec<usize>> = vec![Vec::new(); nb];
@@ -871,7 +1131,6 @@ impl Draws<'_> {
             bands[b].push(k);
         }
         let mut next = vec![0usize; nb];
-        let (w, h) = self.size;
         while self.positions.len() < target {
             let mut any = false;
             for b in 0..nb {
@@ -886,9 +1145,14 @@ impl Draws<'_> {
                     let vals = lat.values(k, p);
                     let (x, y) = lat.cand[k];
                     if self.opts.reject {
-                        if let Some(reason) =
-                            reject_reason(self.frames, vals, x, y, w, h, self.opts)
-                        {
+                        let judged = match reject_reason(self.src, vals, x, y, self.opts) {
+                            Ok(j) => j,
+                            Err(Missing(m)) => {
+                                self.missing = Some(m);
+                                return;
+                            }
+                        };
+                        if let Some(reason) = judged {
                             let r = &mut self.report;
                             match reason {
                                 Reject::Clipped => r.rejected_clipped += 1,
@@ -916,15 +1180,14 @@ impl Draws<'_> {
 /// whose patch value falls in a short band in some frame; each must pass the same rejections as
 /// any robust sample.
 fn fill_bands(
-    frames: &[Frame],
+    src: &dyn Source,
     lat: &Lattice,
     opts: &SampleOptions,
-    (w, h): (usize, usize),
     report: &mut SampleReport,
     positions: &mut Vec<(usize, usize)>,
     values: &mut Vec<[f32; 3]>,
-) -> usize {
-    let p = frames.len();
+) -> Result<usize, Missing> {
+    let p = src.frames();
     let (lo, hi) = (opts.clip_low as f32, opts.clip_high as f32);
     let nb = opts.code_bands.min(256);
     let band = |z: f32| -> Option<usize> {
@@ -941,7 +1204,7 @@ fn fill_bands(
     let filled =
         |counts: &[[usize; 3]]| counts.iter().all(|b| b.iter().all(|&n| n >= MIN_PER_BAND));
     if filled(&counts) {
-        return 0;
+        return Ok(0);
     }
     let (cand, means, order) = (&lat.cand, &lat.means, lat.order.iter().copied());
     let taken: std::collections::HashSet<(usize, usize)> = positions.iter().copied().collect();
@@ -961,7 +1224,7 @@ fn fill_bands(
         if !fills {
             continue;
         }
-        if let Some(reason) = reject_reason(frames, scratch, x, y, w, h, opts) {
+        if let Some(reason) = reject_reason(src, scratch, x, y, opts)? {
             match reason {
                 Reject::Clipped => report.rejected_clipped += 1,
                 Reject::Edge => report.rejected_edge += 1,
@@ -980,7 +1243,7 @@ fn fill_bands(
         values.extend_from_slice(scratch);
         added += 1;
     }
-    added
+    Ok(added)
 }
 
 enum Reject {
@@ -1009,49 +1272,66 @@ fn patch_mean(p: &Pixels, x: usize, y: usize, w: usize, h: usize, r: usize) -> [
 }
 
 fn reject_reason(
-    frames: &[Frame],
+    src: &dyn Source,
     vals: &[[f32; 3]],
     x: usize,
     y: usize,
-    w: usize,
-    h: usize,
     opts: &SampleOptions,
-) -> Option<Reject> {
+) -> Result<Option<Reject>, Missing> {
     let ok = |z: f32| z >= opts.clip_low as f32 && z <= opts.clip_high as f32;
     let informative = (0..3).any(|c| vals.iter().filter(|v| ok(v[c])).count() >= 2);
     if !informative {
-        return Some(Reject::Clipped);
+        return Ok(Some(Reject::Clipped));
     }
     let tol = opts.monotonic_tolerance as f32;
     for pair in vals.windows(2) {
         if pair[1].iter().zip(&pair[0]).any(|(&b, &a)| b < a - tol) {
-            return Some(Reject::NonMonotonic);
+            return Ok(Some(Reject::NonMonotonic));
         }
     }
     // 3 × 3 neighbourhood, clamped at the frame border; per channel, because JPEG's chroma
     // subsampling smears colour edges (blue sky against a white cloud of equal luminance)
     // that a luminance test would not see.
     let thr2 = opts.edge_threshold * opts.edge_threshold;
-    for f in frames {
-        let (mut s, mut s2, mut n) = ([0f32; 3], [0f32; 3], 0f32);
-        for yy in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-            for xx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                let v = code_f(&f.pixels, 3 * (yy * w + xx));
-                for c in 0..3 {
-                    s[c] += v[c];
-                    s2[c] += v[c] * v[c];
-                }
-                n += 1.0;
-            }
-        }
-        for c in 0..3 {
-            let mean = s[c] / n;
-            if s2[c] / n - mean * mean > thr2 {
-                return Some(Reject::Edge);
-            }
-        }
+    match src.edge(x, y, thr2) {
+        Some(true) => Ok(Some(Reject::Edge)),
+        Some(false) => Ok(None),
+        None => Err(Missing(vec![(x, y)])),
     }
-    None
+}
+
+/// The lattice of about `points` pixels (every `step`-th row and column, `step² ≈ w·h /
+/// points`) inside `circle`, in memory order: the candidates of the stratified draw and the
+/// code bands.
+fn lattice_points(
+    (w, h): (usize, usize),
+    circle: Option<Circle>,
+    points: usize,
+) -> Vec<(usize, usize)> {
+    let step = ((w * h) as f64 / points as f64).sqrt().max(1.0) as usize;
+    (0..h)
+        .step_by(step)
+        .flat_map(|y| (0..w).step_by(step).map(move |x| (x, y)))
+        .filter(|&(x, y)| circle.is_none_or(|c| c.contains_pixel(x, y)))
+        .collect()
+}
+
+/// Cell `k`'s pixel span `(x0, x1, y0, y1)` in a `g × g` grid over `area` (`(x0, y0, x1,
+/// y1)`): `[x0 + k·aw/G, x0 + (k+1)·aw/G)` across, likewise down; empty when the area is
+/// narrower than `G` pixels.
+fn cell_bounds(
+    (x0, y0, x1, y1): (usize, usize, usize, usize),
+    g: usize,
+    cell: usize,
+) -> (usize, usize, usize, usize) {
+    let (cx, cy) = (cell % g, cell / g);
+    let (aw, ah) = (x1 - x0, y1 - y0);
+    (
+        x0 + cx * aw / g,
+        x0 + (cx + 1) * aw / g,
+        y0 + cy * ah / g,
+        y0 + (cy + 1) * ah / g,
+    )
 }
 
 #[cfg(test)]
@@ -1114,6 +1394,79 @@ mod tests {
                 })
             })
             .collect()
+    }
+
+    /// Sampling on values gathered at the planned positions (and, when it asks, at the top-up's)
+    /// draws what it draws on the whole frames: the grid with its quotas, top-up and code bands,
+    /// the stratified draw, with and without a circle, on frames with a clipped half (rejections
+    /// make the top-up run).
+    #[test]
+    fn gathered_values_sample_as_the_whole_frames() {
+        let mut frames = gradient_frames(96, 80);
+        for fr in &mut frames {
+            if let Pixels::U8(v) = &mut fr.pixels {
+                for y in 0..80 {
+                    for x in 0..40 {
+                        v[3 * (y * 96 + x)..3 * (y * 96 + x) + 3].fill(255);
+                    }
+                }
+            }
+        }
+        let circle = Circle {
+            cx: 48.0,
+            cy: 40.0,
+            r: 38.0,
+        };
+        let mut rounds_needed = 0;
+        for (k, opts) in [
+            SampleOptions::default(),
+            SampleOptions::stratified(),
+            SampleOptions {
+                seed: 5,
+                samples: 300,
+                ..SampleOptions::default()
+            },
+            SampleOptions::seed_method(50, 5, 3),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            for circle in [None, Some(circle)] {
+                let whole = sample(&frames, circle, &opts).unwrap();
+                let size = (96, 80);
+                let plan = plan(size, frames.len(), circle, &opts).unwrap();
+                let gather = |positions: &[(usize, usize)]| {
+                    let mut g = Gathered::new(positions, frames.len(), opts.patch, size);
+                    for (j, f) in frames.iter().enumerate() {
+                        g.add_frame(j, &f.pixels);
+                    }
+                    g
+                };
+                // The plan, and every other position of it only: sampling then stops at
+                // positions it needs and goes the same way once they are gathered.
+                let sparse: Vec<(usize, usize)> = plan.iter().copied().step_by(2).collect();
+                for (positions, most) in [(&plan, 8), (&sparse, 100_000)] {
+                    let mut src = vec![gather(positions)];
+                    let mut rounds = 0;
+                    let got = loop {
+                        match sample_from(&src, size, circle, &opts).unwrap() {
+                            Ok(s) => break s,
+                            Err(Missing(m)) => {
+                                rounds += 1;
+                                assert!(rounds < most, "case {k}: no end of rounds");
+                                src.push(gather(&m));
+                            }
+                        }
+                    };
+                    rounds_needed += rounds;
+                    assert_eq!(got, whole, "case {k}, circle {circle:?}");
+                }
+            }
+        }
+        assert!(
+            rounds_needed > 0,
+            "no case needed positions beyond the plan"
+        );
     }
 
     #[test]

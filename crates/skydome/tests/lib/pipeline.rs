@@ -537,3 +537,233 @@ fn a_dome_merged_in_its_square_is_the_whole_merge_cropped() {
         );
     }
 }
+
+/// A synthetic fish-eye bracket (`evs`, `width × height`) as JPEG files (quality 92), with its
+/// exposure times.
+fn encoded_bracket(evs: &[f64], width: usize, height: usize) -> (Vec<EncodedFrame>, Vec<f64>) {
+    use skydome::formats::picture::{encode_rgb8, PictureFormat};
+    use skydome::image::RgbImage;
+    let b = skydome::synth::generate(&skydome::synth::SynthOptions {
+        width,
+        height,
+        evs: evs.to_vec(),
+        ..Default::default()
+    })
+    .expect("synth");
+    let times = b.frames.iter().map(|f| f.exposure.time_s).collect();
+    let encoded = b
+        .frames
+        .iter()
+        .map(|f| {
+            let Pixels::U8(v) = &f.pixels else {
+                panic!("8-bit synth")
+            };
+            let img = RgbImage {
+                width: f.width,
+                height: f.height,
+                data: v.clone(),
+            };
+            EncodedFrame {
+                name: format!("{}.jpg", f.name),
+                bytes: encode_rgb8(&img, PictureFormat::Jpeg { quality: 92 }).expect("jpeg"),
+            }
+        })
+        .collect();
+    (encoded, times)
+}
+
+/// The options of a plain crop to the dome (the job the streamed intake reads), with a preview.
+fn plain_crop_options() -> Options {
+    Options {
+        lens: LensSource::Detect {
+            model: LensKind::Stereographic,
+            fov_deg: 235.0,
+            circle: None,
+        },
+        sky: SkyOptions {
+            crop: true,
+            sun: pipeline::SunMode::Auto,
+            north_deg: Some(10.0),
+            ..SkyOptions::default()
+        },
+        products: pipeline::Products {
+            preview: true,
+            ..pipeline::Products::default()
+        },
+        ..Options::default()
+    }
+}
+
+/// Runs `frames` with `times` and `o`: the dome, and whether the run read the frames one at a
+/// time (the streamed intake reports the calibrating stage frame by frame).
+fn run_watching(frames: Frames, times: &[f64], o: &Options) -> (pipeline::Dome, bool) {
+    let mut per_frame = false;
+    let dome = pipeline::run(
+        Input {
+            times: Some(times.to_vec()),
+            ..Input::new(frames)
+        },
+        o,
+        &mut |p: &Progress| {
+            per_frame |= p.stage == Stage::Calibrating && p.fraction > 0.0 && p.fraction < 1.0;
+            ControlFlow::Continue(())
+        },
+    )
+    .expect("run");
+    (dome, per_frame)
+}
+
+/// A plain crop of encoded photos above the frame memory budget is read one frame at a time
+/// (the scan, then the second pass that gathers the window, the flags and the sampler's
+/// values): the run must give what the whole decoded frames give, bit for bit — the dome, its
+/// header, the pictures, the report and the camera profile — for a 9- and a 3-frame bracket,
+/// the circle detected, with the default calibration, the stratified noise-weighted one and a
+/// camera profile. Without a budget, or with one the bracket fits in, the same encoded photos
+/// are decoded whole (no streaming), with the same bytes.
+#[test]
+fn a_bracket_read_one_frame_at_a_time_gives_the_whole_frames_bytes() {
+    use skydome::response::CalibrateOptions;
+    for evs in [
+        vec![-4.0, -3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0, 4.0],
+        vec![-2.0, 0.0, 2.0],
+    ] {
+        let (encoded, times) = encoded_bracket(&evs, 400, 340);
+        let size = 3 * 400 * 340 * evs.len() as u64;
+        let decoded = || -> Vec<DecodedFrame> {
+            encoded
+                .iter()
+                .map(|e| bracket::decode(&e.name, &e.bytes, &Default::default()).expect("decode"))
+                .collect()
+        };
+        let base = plain_crop_options();
+        let noise = Options {
+            response: pipeline::ResponseSource::Calibrate(CalibrateOptions::noise_fit()),
+            ..base.clone()
+        };
+        let first = run_watching(Frames::Decoded(decoded()), &times, &base).0;
+        let profiled = Options {
+            response: pipeline::ResponseSource::Profile(
+                first.camera_profile.clone().expect("a profile"),
+            ),
+            ..base.clone()
+        };
+        for o in [&base, &noise, &profiled] {
+            let budget = |b: Option<u64>| Options {
+                frame_memory_budget: b,
+                ..o.clone()
+            };
+            let (whole, streamed_whole) = run_watching(Frames::Decoded(decoded()), &times, o);
+            let (streamed, streamed_flag) = run_watching(
+                Frames::Encoded(encoded.clone()),
+                &times,
+                &budget(Some(size - 1)),
+            );
+            assert!(!streamed_whole && streamed_flag, "{evs:?}: not streamed");
+            let hdr = |d: &pipeline::Dome| {
+                formats::encode_radiance(&d.radiance, &d.meta, RadianceFormat::Hdr)
+                    .expect("hdr")
+                    .bytes
+            };
+            assert!(hdr(&whole) == hdr(&streamed), "{evs:?}: the .hdr differs");
+            assert_eq!(whole.preview, streamed.preview);
+            assert_eq!(json(&whole.report), json(&streamed.report), "{evs:?}");
+            assert_eq!(
+                json(&whole.camera_profile),
+                json(&streamed.camera_profile),
+                "{evs:?}"
+            );
+            assert!(whole.report.clipped_high_pixels + whole.report.clipped_low_pixels > 0);
+            // The gate: no budget, or one the bracket fits in, reads the encoded photos whole.
+            for b in [None, Some(size)] {
+                let (d, per_frame) =
+                    run_watching(Frames::Encoded(encoded.clone()), &times, &budget(b));
+                assert!(!per_frame, "{evs:?}, budget {b:?}: streamed");
+                assert!(
+                    hdr(&d) == hdr(&whole),
+                    "{evs:?}, budget {b:?}: the .hdr differs"
+                );
+            }
+        }
+    }
+}
+
+/// The gate of the streamed intake: encoded photos whose decoded size (from their headers:
+/// frames × width × height × 3 bytes) exceeds the budget, with a job that allows it; never
+/// without a budget, for decoded frames, or for a job that reads the whole photos.
+#[test]
+fn the_frames_are_streamed_only_above_the_memory_budget() {
+    let (encoded, _) = encoded_bracket(&[-2.0, 0.0, 2.0], 300, 200);
+    let size = 3 * 3 * 300 * 200;
+    assert_eq!(pipeline::decoded_size(&encoded), size);
+    let input = Input::new(Frames::Encoded(encoded.clone()));
+    let with = |budget: Option<u64>, f: fn(&mut Options)| {
+        let mut o = Options {
+            frame_memory_budget: budget,
+            ..plain_crop_options()
+        };
+        f(&mut o);
+        o
+    };
+    let keep = |_: &mut Options| {};
+    assert!(pipeline::streams_input(&input, &with(Some(size - 1), keep)));
+    assert!(pipeline::streams_input(&input, &with(Some(0), keep)));
+    assert!(!pipeline::streams_input(&input, &with(Some(size), keep)));
+    assert!(!pipeline::streams_input(&input, &with(None, keep)));
+    assert!(!pipeline::streams_input(&input, &Options::default()));
+    let decoded: Vec<DecodedFrame> = encoded
+        .iter()
+        .map(|e| bracket::decode(&e.name, &e.bytes, &Default::default()).expect("decode"))
+        .collect();
+    let decoded = Input::new(Frames::Decoded(decoded));
+    assert!(!pipeline::streams_input(&decoded, &with(Some(0), keep)));
+    // Jobs that read the whole photos: no crop, alignment, a ghost-aware merge.
+    for f in [
+        (|o: &mut Options| o.sky.crop = false) as fn(&mut Options),
+        |o| o.align = true,
+        |o| o.ghosts = true,
+        |o| o.lens = LensSource::None,
+    ] {
+        assert!(!pipeline::streams_input(&input, &with(Some(0), f)));
+    }
+    // A photo whose header does not read counts for nothing.
+    let mut broken = encoded;
+    broken[1].bytes.truncate(4);
+    assert_eq!(pipeline::decoded_size(&broken), size / 3 * 2);
+}
+
+/// A photo that does not decode, read one at a time (the 5th of 9, cut short): the run ends
+/// with the error the whole frames give, one line naming the file.
+#[test]
+fn a_corrupt_photo_read_one_at_a_time_is_named() {
+    let evs = [-4.0, -3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0, 4.0];
+    let (mut encoded, times) = encoded_bracket(&evs, 400, 340);
+    let n = encoded[4].bytes.len();
+    encoded[4].bytes.truncate(n / 2);
+    let name = encoded[4].name.clone();
+    let input = || Input {
+        times: Some(times.clone()),
+        ..Input::new(Frames::Encoded(encoded.clone()))
+    };
+    let streamed = Options {
+        frame_memory_budget: Some(0),
+        ..plain_crop_options()
+    };
+    assert!(pipeline::streams_input(&input(), &streamed));
+    let mut decoded_after = 0usize;
+    let err = pipeline::run(input(), &streamed, &mut |p: &Progress| {
+        decoded_after += usize::from(p.stage != Stage::Decoding);
+        ControlFlow::Continue(())
+    })
+    .expect_err("a corrupt photo");
+    let msg = err.to_string();
+    assert!(msg.contains(&name), "{msg}");
+    assert!(!msg.contains('\n'), "{msg}");
+    assert_eq!(decoded_after, 0, "the run went past decoding");
+    let whole = pipeline::run(input(), &plain_crop_options(), &mut pipeline::no_progress)
+        .expect_err("a corrupt photo");
+    assert_eq!(msg, whole.to_string());
+}
+
+fn json<T: serde::Serialize>(v: &T) -> String {
+    serde_json::to_string(v).expect("json")
+}
