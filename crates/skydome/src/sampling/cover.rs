@@ -26,7 +26,8 @@ impl Draws<'_> {
         let nb = self.opts.cover.clamp(1, 256);
         let ncell = p * 3 * nb;
         let cell_of = |j: usize, c: usize, z: f32| -> Option<usize> {
-            (z >= 0.5 && z <= 254.5)
+            (0.5..=254.5)
+                .contains(&z)
                 .then(|| (j * 3 + c) * nb + ((z / 256.0 * nb as f32) as usize).min(nb - 1))
         };
         let mut cells: Vec<Vec<usize>> = vec![Vec::new(); ncell];

@@ -711,9 +711,9 @@ pub fn curve_error(case: &Case, g: &[Vec<f64>; 3]) -> [f64; 4] {
             .ln()
     };
     let mut out = [0.0; 4];
-    for c in 0..3 {
+    for (c, gc) in g.iter().enumerate() {
         let d: Vec<f64> = (0..256)
-            .map(|z| (g[c][z] - truth(c, z)) / std::f64::consts::LN_2)
+            .map(|z| (gc[z] - truth(c, z)) / std::f64::consts::LN_2)
             .collect();
         let off = d[64..192].iter().sum::<f64>() / 128.0;
         let rms = |r: std::ops::RangeInclusive<usize>| {
@@ -795,8 +795,10 @@ fn calibration_candidates() {
             let floor = rms3(eo);
             let orc_sun = median_offset(&orc, &c.truth, &sun, eo);
             let eval = |cal: &skydome::response::Calibration, w: Weighting| {
-                let mut opts = MergeOptions::default();
-                opts.weighting = w;
+                let opts = MergeOptions {
+                    weighting: w,
+                    ..MergeOptions::default()
+                };
                 let img = merge(&c.frames, &cal.response, &opts).unwrap().radiance;
                 let e = scale_and_rmse(&img, &c.truth, &sky);
                 (
