@@ -47,7 +47,9 @@ pub struct CalibArgs {
     pub hat_margin: Option<f64>,
     /// `robust` rejects clipped, edge and non-monotonic samples and raises N; `noise` is robust
     /// with 2000 samples stratified over the middle frame's codes and the noise-weighted fit
-    /// (λ 100); `colour-hdri` is colour-hdri's Debevec calibration (1000 histogram samples,
+    /// (λ 100); `covering` is the noise-weighted fit on 2000 samples spread over 16 code bands of
+    /// every frame and channel, codes from 1 counted (λ 150; closest to the oracle, see
+    /// docs/accuracy.md); `colour-hdri` is colour-hdri's Debevec calibration (1000 histogram samples,
     /// Grossberg & Nayar: no alignment needed, but noisy frames bend the curve — see
     /// docs/accuracy.md; λ 30, its hat); `seed` is the original method exactly (random pixels
     /// per cell, no rejection).
@@ -68,6 +70,8 @@ pub enum Method {
     Robust,
     /// Robust, stratified, 2000 samples, the noise-weighted fit.
     Noise,
+    /// Robust, covering every code band of every frame, 2000 samples, the noise-weighted fit.
+    Covering,
     /// colour-hdri's calibration: histogram samples, λ 30, its hat.
     ColourHdri,
     /// The seed's method exactly.
@@ -115,6 +119,7 @@ impl CalibArgs {
         match self.method {
             Method::Robust => robust(CalibrateOptions::default()),
             Method::Noise => robust(CalibrateOptions::noise_fit()),
+            Method::Covering => robust(CalibrateOptions::covering()),
             Method::ColourHdri => {
                 let base = CalibrateOptions::colour_hdri();
                 CalibrateOptions {

@@ -53,6 +53,7 @@
 use crate::bracket::{Frame, Pixels};
 use crate::image::Circle;
 
+mod cover;
 mod histogram;
 
 /// Draws per wanted sample before a cell gives up (the cell may lie outside the circle).
@@ -184,6 +185,14 @@ pub struct SampleOptions {
     /// brightness range its share. [`SampleOptions::grid`] is not used.
     #[serde(default)]
     pub stratify: usize,
+    /// Covering draw (0 = off, default; see [`SampleOptions::covering`]): candidates from the
+    /// even lattice are put into this many equal bands of `0..=255` *per frame and channel*,
+    /// and the bands are filled in turn, sparse ones first, so every frame's every code band —
+    /// the darkest codes of the longest frame, the brightest unclipped ones of the shortest —
+    /// holds samples when the scene has pixels there. Takes precedence over
+    /// [`SampleOptions::stratify`] and the grid.
+    #[serde(default, skip_serializing_if = "is_zero_usize")]
+    pub cover: usize,
     /// Histogram sampling (Grossberg & Nayar 2003; off by default, on in
     /// [`SampleOptions::histogram_method`]): `samples` rank-matched samples from each frame's
     /// cumulative histogram instead of pixel positions (see the module's *Histogram sampling*).
@@ -191,6 +200,10 @@ pub struct SampleOptions {
     /// grid, seed, rejections, patch, code bands and stratification are not used.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub histogram: bool,
+}
+
+fn is_zero_usize(v: &usize) -> bool {
+    *v == 0
 }
 
 /// About how many lattice pixels the stratified draw and the code-band fill consider.
@@ -219,6 +232,7 @@ impl Default for SampleOptions {
             patch: 1,
             code_bands: 16,
             stratify: 0,
+            cover: 0,
             histogram: false,
         }
     }
@@ -267,6 +281,21 @@ impl SampleOptions {
         }
     }
 
+    /// The covering draw of [`crate::response::CalibrateOptions::covering`]: 2000 samples
+    /// over 16 code bands of every frame and channel ([`SampleOptions::cover`]), every
+    /// rejection, patch means and code bands, with codes from 1 (not 5) counted as measured by
+    /// the clipped test — so a sample whose shorter frame reads 1–4 while the longest reads the
+    /// dim ground can hold the curve's toe (the noise-weighted fit gives those codes little
+    /// weight).
+    pub fn covering() -> Self {
+        Self {
+            samples: STRATIFIED_SAMPLES,
+            cover: 16,
+            clip_low: 1,
+            ..Self::default()
+        }
+    }
+
     /// Histogram sampling (Grossberg & Nayar 2003) with `samples` rank-matched samples per
     /// channel — colour-hdri's default sampling (it takes 1000).
     pub fn histogram_method(samples: usize) -> Self {
@@ -294,6 +323,12 @@ impl SampleOptions {
             return Err(SamplingError::BadOption(format!(
                 "clip_low {} must be below clip_high {}",
                 self.clip_low, self.clip_high
+            )));
+        }
+        if self.cover > 256 {
+            return Err(SamplingError::BadOption(format!(
+                "cover = {} (use 0..=256 bands; 16 is typical)",
+                self.cover
             )));
         }
         if self.stratify > 256 {
@@ -673,7 +708,7 @@ pub(crate) fn plan(
     let quota = cell_quotas(opts.grid, target, &mut rng);
     let inside = |x: usize, y: usize| circle.is_none_or(|c| c.contains_pixel(x, y));
     let mut out = Vec::new();
-    if opts.stratify > 0 {
+    if opts.stratify > 0 || opts.cover > 0 {
         out.extend(lattice_points(size, circle, LATTICE_POINTS));
         return Ok(out);
     }
@@ -782,12 +817,16 @@ fn sample_once(
         scratch: vec![[0f32; 3]; p],
     };
     let mut lattice = None;
-    if opts.stratify > 0 {
+    if opts.cover > 0 || opts.stratify > 0 {
         let lat = match Lattice::new(src, circle, opts, (w, h), &mut rng, LATTICE_POINTS) {
             Ok(l) => l,
             Err(m) => return Ok(Err(m)),
         };
-        draw.stratified(&lat, target);
+        if opts.cover > 0 {
+            draw.cover(&lat, target);
+        } else {
+            draw.stratified(&lat, target);
+        }
         draw.report.stratified = draw.positions.len();
         lattice = Some(lat);
     } else {

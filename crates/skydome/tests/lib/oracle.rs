@@ -37,6 +37,15 @@ use skydome::HdrImage;
 pub const TUNING_SEEDS: [u64; 3] = [1, 2, 3];
 /// Seeds the targets are asserted on (never used for tuning).
 pub const HELD_OUT_SEEDS: [u64; 3] = [7001, 7002, 7003];
+/// More tuning seeds, drawn with the sun's zenith angle 0–87° ([`case_with_sun`]): the covering
+/// calibration's λ and draw were chosen on these and [`TUNING_SEEDS`]
+/// ([`calibration_candidates`]).
+pub const MORE_TUNING_SEEDS: [u64; 12] = [11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22];
+/// A fresh held-out set (sun zenith 0–87°, i.e. a sun 3–90° high), not looked at until the
+/// covering calibration was fixed.
+pub const FRESH_SEEDS: [u64; 12] = [
+    9101, 9102, 9103, 9104, 9105, 9106, 9107, 9108, 9109, 9110, 9111, 9112,
+];
 
 /// Side of the synthetic frames, pixels.
 const SIZE: usize = 160;
@@ -62,6 +71,12 @@ pub struct Case {
 
 /// Draws the case of `seed` with `n` frames.
 pub fn case(seed: u64, n: usize) -> Case {
+    case_with_sun(seed, n, (10.0, 80.0))
+}
+
+/// [`case`] with the sun's zenith angle drawn from `zenith` (degrees; `(0, 87)` is a sun
+/// height of 3–90°).
+pub fn case_with_sun(seed: u64, n: usize, zenith: (f64, f64)) -> Case {
     let mut rng = SplitMix64::new(seed.wrapping_mul(0x9E37_79B9) ^ n as u64);
     let mut uni = |a: f64, b: f64| a + (b - a) * rng.next_f64();
     let spacing = [1.0, 1.5, 2.0, 3.0][(uni(0.0, 4.0) as usize).min(3)];
@@ -71,7 +86,7 @@ pub fn case(seed: u64, n: usize) -> Case {
     let full_well = uni(2000f64.ln(), 60000f64.ln()).exp();
     let read_noise = uni(1.0, 6.0);
     let brightness = uni(-1.0, 1.0);
-    let sun = (uni(10.0, 80.0), uni(0.0, std::f64::consts::TAU));
+    let sun = (uni(zenith.0, zenith.1), uni(0.0, std::f64::consts::TAU));
     let crf = [0, 1, 2].map(|_| Crf {
         gamma: uni(1.8, 2.6),
         shoulder: uni(0.4, 1.5),
@@ -281,14 +296,18 @@ pub struct Measured {
     /// Frames.
     pub n: usize,
     /// Sky log2 RMSE (RMS over channels): the oracle; the noise merge and the hat on the default
-    /// calibration; the noise merge on the noise-weighted calibration (`--method noise`).
-    pub sky: [f64; 4],
+    /// calibration; the noise merge on the noise-weighted calibration (`--method noise`); the
+    /// noise merge on the covering calibration (`--method covering`).
+    pub sky: [f64; 5],
     /// Dim-ground log2 RMSE after the sky's scale: noise merge and hat on the default
-    /// calibration, noise merge on the noise-weighted calibration.
-    pub ground: [f64; 3],
+    /// calibration, noise merge on the noise-weighted and on the covering calibration.
+    pub ground: [f64; 4],
     /// Sun: median over the disc of log2(merged / truth) after the sky's scale (a lower bound,
-    /// negative; closer to zero is better), the same three merges.
-    pub sun: [f64; 3],
+    /// negative; closer to zero is better), the same four merges.
+    pub sun: [f64; 4],
+    /// The oracle's sun (same measure): for a disc clipped in every frame, the true curve's
+    /// top minus the shortest frame's `ln Δt` — the best lower bound the bracket gives.
+    pub sun_oracle: f64,
 }
 
 /// Dim-ground error about the sky's per-channel scale: the RMS over channels and pixels of
@@ -330,30 +349,35 @@ fn median_offset(a: &HdrImage, truth: &HdrImage, mask: &[bool], scale: [(f64, f6
     d[d.len() / 2]
 }
 
-/// Measures one case: the oracle, the default, the hat and the noise merge.
-pub fn measure(seed: u64, n: usize) -> (Case, Measured) {
-    let c = case(seed, n);
+/// Measures one case: the oracle, the default calibration with the noise merge and the hat,
+/// and the noise merge on the noise-weighted and the covering calibrations.
+pub fn measure_case(c: Case) -> (Case, Measured) {
     let [sky, ground, sun] = regions(&c);
     let orc = oracle(&c);
     let grid = CalibrateOptions::default();
     let def = skydome_merge(&c, &grid, Some(Weighting::Noise));
     let hat = skydome_merge(&c, &grid, Some(Weighting::Hat));
     let noise = skydome_merge(&c, &CalibrateOptions::noise_fit(), Some(Weighting::Noise));
+    let cover = skydome_merge(&c, &CalibrateOptions::covering(), Some(Weighting::Noise));
     let e = |img: &HdrImage| scale_and_rmse(img, &c.truth, &sky);
-    let (ed, eh, en) = (e(&def), e(&hat), e(&noise));
+    let (eo, ed, eh, en, ec) = (e(&orc), e(&def), e(&hat), e(&noise), e(&cover));
+    let n = c.frames.len();
     let m = Measured {
         n,
-        sky: [rms3(e(&orc)), rms3(ed), rms3(eh), rms3(en)],
+        sky: [rms3(eo), rms3(ed), rms3(eh), rms3(en), rms3(ec)],
         ground: [
             offset_rmse(&def, &c.truth, &ground, ed),
             offset_rmse(&hat, &c.truth, &ground, eh),
             offset_rmse(&noise, &c.truth, &ground, en),
+            offset_rmse(&cover, &c.truth, &ground, ec),
         ],
         sun: [
             median_offset(&def, &c.truth, &sun, ed),
             median_offset(&hat, &c.truth, &sun, eh),
             median_offset(&noise, &c.truth, &sun, en),
+            median_offset(&cover, &c.truth, &sun, ec),
         ],
+        sun_oracle: median_offset(&orc, &c.truth, &sun, eo),
     };
     (c, m)
 }
@@ -362,13 +386,18 @@ pub fn measure(seed: u64, n: usize) -> (Case, Measured) {
 /// per frame count: the mean ratio to the oracle of the default, the hat and the noise merge.
 /// Returns the cases' measurements.
 pub fn run_all(seeds: &[u64]) -> Vec<Measured> {
+    run_all_with(seeds, case)
+}
+
+/// [`run_all`] with the cases drawn by `draw(seed, frames)`.
+pub fn run_all_with(seeds: &[u64], draw: impl Fn(u64, usize) -> Case) -> Vec<Measured> {
     let mut all = Vec::new();
     for n in 2..=9 {
         let mut group = Vec::new();
         for &seed in seeds {
-            let (c, m) = measure(seed, n);
+            let (c, m) = measure_case(draw(seed, n));
             println!(
-                "{}: sky oracle {:.4} noise {:.4} ({:.3}×) hat {:.4} ({:.3}×) noise on --method noise {:.4} ({:.3}×); ground {:.3} / {:.3} / {:.3}; sun {:+.2} / {:+.2} / {:+.2}",
+                "{}: sky oracle {:.4} noise {:.4} ({:.3}×) hat {:.4} ({:.3}×) noise on --method noise {:.4} ({:.3}×) on --method covering {:.4} ({:.3}×); ground {:.3} / {:.3} / {:.3} / {:.3}; sun {:+.2} / {:+.2} / {:+.2} / {:+.2} (oracle {:+.2})",
                 c.label,
                 m.sky[0],
                 m.sky[1],
@@ -377,22 +406,28 @@ pub fn run_all(seeds: &[u64]) -> Vec<Measured> {
                 m.sky[2] / m.sky[0],
                 m.sky[3],
                 m.sky[3] / m.sky[0],
+                m.sky[4],
+                m.sky[4] / m.sky[0],
                 m.ground[0],
                 m.ground[1],
                 m.ground[2],
+                m.ground[3],
                 m.sun[0],
                 m.sun[1],
-                m.sun[2]
+                m.sun[2],
+                m.sun[3],
+                m.sun_oracle
             );
             group.push(m);
         }
         let mean =
             |k: usize| group.iter().map(|m| m.sky[k] / m.sky[0]).sum::<f64>() / group.len() as f64;
         println!(
-            "{n} frames: mean ratio to the oracle: default {:.3}, hat {:.3}, noise {:.3}",
+            "{n} frames: mean ratio to the oracle: default {:.3}, hat {:.3}, noise {:.3}, covering {:.3}",
             mean(1),
             mean(2),
-            mean(3)
+            mean(3),
+            mean(4)
         );
         all.extend(group);
     }
@@ -490,6 +525,87 @@ fn the_noise_weighted_calibration_is_within_the_oracle_targets_on_held_out_brack
     }
 }
 
+/// What the covering calibration (`--method covering`) with the noise merge reaches on the
+/// held-out seeds, mean ratio to the oracle per frame count 2–9: 1.043 1.032 1.039 1.025 1.007
+/// 1.018 1.036 1.045 — the issue's targets ([`target`]) met at every count.
+pub const REACHED_COVERING: [f64; 8] = [1.043, 1.032, 1.039, 1.025, 1.007, 1.018, 1.036, 1.045];
+
+/// On the fresh held-out seeds ([`FRESH_SEEDS`], suns 3–90° high): 1.025 1.017 1.038 1.041
+/// 1.031 1.019 1.097 1.027 — every target met but 8 frames (one 8 × 3 EV bracket at 1.55×,
+/// the default calibration's curve 2.17×).
+pub const REACHED_COVERING_FRESH: [f64; 8] =
+    [1.025, 1.017, 1.038, 1.041, 1.031, 1.019, 1.097, 1.027];
+
+/// The covering calibration against the oracle on `all`: the mean sky ratio per frame count
+/// within 0.5 % of `reached` (which the docs quote), no bracket's sky more than 5 % worse than
+/// the noise merge on the default calibration's curve (`sky_slack`), and no clipped sun
+/// farther from the oracle's lower bound than the default calibration's by more than 0.1
+/// stops. The dim ground is printed with the default calibration's beside it and counted, not
+/// asserted: on 2–4-frame brackets the covering curve's toe still reads some dim grounds worse
+/// (see docs/accuracy.md).
+fn check_covering(all: &[Measured], reached: &[f64; 8], sky_slack: f64) -> usize {
+    let mut ground_losses = 0;
+    for n in 2..=9 {
+        let g: Vec<&Measured> = all.iter().filter(|m| m.n == n).collect();
+        let mean = g.iter().map(|m| m.sky[4] / m.sky[0]).sum::<f64>() / g.len() as f64;
+        println!(
+            "{n} frames: --method covering {mean:.3}× the oracle (issue target {:.2}, {})",
+            target(n),
+            if mean <= target(n) { "met" } else { "NOT met" }
+        );
+        assert!(
+            mean <= reached[n - 2] + 0.005,
+            "{n} frames: mean ratio {mean:.3} (docs: {:.3})",
+            reached[n - 2]
+        );
+        for m in g {
+            assert!(
+                m.sky[4] <= m.sky[1] * sky_slack,
+                "{n} frames: sky {:?}",
+                m.sky
+            );
+            let dist = |s: f64| (s - m.sun_oracle).abs();
+            assert!(
+                dist(m.sun[3]) <= dist(m.sun[0]).min(dist(m.sun[1])) + 0.1,
+                "{n} frames: sun {:?} (oracle {:+.2})",
+                m.sun,
+                m.sun_oracle
+            );
+            let lost = m.ground[3] > 1.05 * m.ground[0].min(m.ground[1]) + 0.005;
+            ground_losses += lost as usize;
+            println!(
+                "{n} frames: dim ground {:.3} stops (default calibration {:.3} noise / {:.3} hat){}",
+                m.ground[3],
+                m.ground[0],
+                m.ground[1],
+                if lost { " LOST" } else { "" }
+            );
+        }
+    }
+    println!("dim ground lost to the default calibration on {ground_losses} brackets");
+    ground_losses
+}
+
+/// The covering calibration meets the issue's targets on the held-out seeds (see
+/// [`check_covering`]); dim ground lost on 5 of the 24 brackets.
+#[test]
+fn the_covering_calibration_meets_the_oracle_targets_on_held_out_brackets() {
+    let lost = check_covering(held_out(), &REACHED_COVERING, 1.05);
+    for (n, r) in (2..=9).zip(REACHED_COVERING) {
+        assert!(r <= target(n), "{n} frames: {r}");
+    }
+    assert!(lost <= 5, "dim ground lost on {lost} brackets (docs: 5)");
+}
+
+/// The covering calibration on the fresh held-out set (suns 3–90° high, [`FRESH_SEEDS`]):
+/// within [`REACHED_COVERING_FRESH`]; the dim ground lost on 10 of the 96 brackets.
+#[test]
+fn the_covering_calibration_on_fresh_held_out_brackets() {
+    let all = run_all_with(&FRESH_SEEDS, |seed, n| case_with_sun(seed, n, (0.0, 87.0)));
+    let lost = check_covering(&all, &REACHED_COVERING_FRESH, 1.10);
+    assert!(lost <= 10, "dim ground lost on {lost} brackets (docs: 10)");
+}
+
 /// The held-out measurements, computed once for both tests.
 fn held_out() -> &'static [Measured] {
     static ALL: std::sync::OnceLock<Vec<Measured>> = std::sync::OnceLock::new();
@@ -580,5 +696,179 @@ fn calibration_choices_against_the_oracle() {
         if n >= 3 {
             assert!(h[0] >= d[0] * 1.2, "{n} frames: histogram {h:?} vs {d:?}");
         }
+    }
+}
+
+/// Per channel, the calibrated curve's error against the true one (after the offset over
+/// codes 64..=191), RMS over the channels, in stops: `[toe 1..=15, middle 16..=239, top
+/// 240..=254, g(255)]` (the last signed, mean over channels).
+pub fn curve_error(case: &Case, g: &[Vec<f64>; 3]) -> [f64; 4] {
+    let o = &case.opts;
+    let b = o.black_level;
+    let truth = |c: usize, z: usize| {
+        o.crf[c]
+            .inverse(((z as f64) - b).max(0.5) / (255.0 - b))
+            .ln()
+    };
+    let mut out = [0.0; 4];
+    for (c, gc) in g.iter().enumerate() {
+        let d: Vec<f64> = (0..256)
+            .map(|z| (gc[z] - truth(c, z)) / std::f64::consts::LN_2)
+            .collect();
+        let off = d[64..192].iter().sum::<f64>() / 128.0;
+        let rms = |r: std::ops::RangeInclusive<usize>| {
+            let n = r.clone().count() as f64;
+            (r.map(|z| (d[z] - off).powi(2)).sum::<f64>() / n).sqrt()
+        };
+        out[0] += rms(1..=15).powi(2) / 3.0;
+        out[1] += rms(16..=239).powi(2) / 3.0;
+        out[2] += rms(240..=254).powi(2) / 3.0;
+        out[3] += (d[255] - off) / 3.0;
+    }
+    [out[0].sqrt(), out[1].sqrt(), out[2].sqrt(), out[3]]
+}
+
+/// The calibrations tried while choosing the default's (see [`calibration_candidates`]):
+/// `SKYDOME_ORACLE_CANDIDATES`, `;`-separated, each a `,`-separated list of `key=value` on top
+/// of [`CalibrateOptions::noise_fit`] (keys `samples`, `cover`, `stratify`, `lo`, `hi`,
+/// `lambda`, `margin`, `bands`, `fit`); `noise_fit` alone without the variable.
+fn candidates() -> Vec<(String, CalibrateOptions)> {
+    let spec = std::env::var("SKYDOME_ORACLE_CANDIDATES").unwrap_or_default();
+    let mut out = vec![("noise_fit".to_string(), CalibrateOptions::noise_fit())];
+    for cand in spec.split(';').filter(|c| !c.trim().is_empty()) {
+        let mut o = CalibrateOptions::noise_fit();
+        for kv in cand.split(',') {
+            let (k, v) = kv.split_once('=').expect("key=value");
+            let f: f64 = v.trim().parse().unwrap_or(f64::NAN);
+            match k.trim() {
+                "samples" => o.sampling.samples = f as usize,
+                "cover" => o.sampling.cover = f as usize,
+                "stratify" => o.sampling.stratify = f as usize,
+                "lo" => o.sampling.clip_low = f as u8,
+                "hi" => o.sampling.clip_high = f as u8,
+                "bands" => o.sampling.code_bands = f as usize,
+                "lambda" => o.lambda = f,
+                "margin" => o.hat_margin = f,
+                "fit" => o.fit = v.trim().parse().expect("fit"),
+                other => panic!("unknown key {other}"),
+            }
+        }
+        out.push((cand.trim().to_string(), o));
+    }
+    out
+}
+
+/// Tuning bench: every candidate calibration with the noise merge against the oracle and against
+/// the default calibration (noise merge and hat merge), per bracket: sky ratio, dim ground,
+/// clipped sun and the curve's toe/top errors. Seeds from `SKYDOME_ORACLE_SEEDS` (comma
+/// separated; default [`MORE_TUNING_SEEDS`] with the sun's zenith 0–87°), sun zenith 0–87°
+/// when `SKYDOME_ORACLE_WIDE_SUN=1`, frame counts from `SKYDOME_ORACLE_FRAMES` (default
+/// 2–9); candidates from `SKYDOME_ORACLE_CANDIDATES` ([`candidates`]). A minute or two:
+/// `SKYDOME_ORACLE_CANDIDATES="cover=16,lo=1,lambda=150" cargo test --workspace --test lib --
+/// --ignored oracle::calibration_candidates --nocapture`.
+#[test]
+#[ignore = "a tuning bench for calibration candidates; prints only"]
+fn calibration_candidates() {
+    use skydome::response::calibrate;
+    let given: Option<Vec<u64>> = std::env::var("SKYDOME_ORACLE_SEEDS")
+        .ok()
+        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect());
+    let wide = given.is_none() || std::env::var("SKYDOME_ORACLE_WIDE_SUN").is_ok_and(|v| v == "1");
+    let seeds = given.unwrap_or_else(|| MORE_TUNING_SEEDS.to_vec());
+    let ns: Vec<usize> = std::env::var("SKYDOME_ORACLE_FRAMES")
+        .ok()
+        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect())
+        .unwrap_or_else(|| (2..=9).collect());
+    let cands = candidates();
+    let mut ratio_sum = vec![vec![0.0f64; ns.len()]; cands.len() + 2];
+    let mut losses = vec![[0usize; 3]; cands.len()];
+    for (ni, &n) in ns.iter().enumerate() {
+        for &seed in &seeds {
+            let c = if wide {
+                case_with_sun(seed, n, (0.0, 87.0))
+            } else {
+                case(seed, n)
+            };
+            let [sky, ground, sun] = regions(&c);
+            let orc = oracle(&c);
+            let eo = scale_and_rmse(&orc, &c.truth, &sky);
+            let floor = rms3(eo);
+            let orc_sun = median_offset(&orc, &c.truth, &sun, eo);
+            let eval = |cal: &skydome::response::Calibration, w: Weighting| {
+                let opts = MergeOptions {
+                    weighting: w,
+                    ..MergeOptions::default()
+                };
+                let img = merge(&c.frames, &cal.response, &opts).unwrap().radiance;
+                let e = scale_and_rmse(&img, &c.truth, &sky);
+                (
+                    rms3(e) / floor,
+                    offset_rmse(&img, &c.truth, &ground, e),
+                    median_offset(&img, &c.truth, &sun, e),
+                    curve_error(&c, cal.response.curves()),
+                )
+            };
+            let def = calibrate(&c.frames, c.circle, &CalibrateOptions::default()).unwrap();
+            let dn = eval(&def, Weighting::Noise);
+            let dh = eval(&def, Weighting::Hat);
+            println!("{} (oracle sun {orc_sun:+.2})", c.label);
+            let line = |name: &str, r: &(f64, f64, f64, [f64; 4])| {
+                println!(
+                    "  {name:>14}: sky {:.3} ground {:.3} sun {:+.2} | curve toe {:.3} mid {:.3} top {:.3} g255 {:+.2}",
+                    r.0, r.1, r.2, r.3[0], r.3[1], r.3[2], r.3[3]
+                )
+            };
+            line("default+noise", &dn);
+            line("default+hat", &dh);
+            ratio_sum[0][ni] += dn.0 / seeds.len() as f64;
+            ratio_sum[1][ni] += dh.0 / seeds.len() as f64;
+            for (k, (name, o)) in cands.iter().enumerate() {
+                let cal = match calibrate(&c.frames, c.circle, o) {
+                    Ok(cal) => cal,
+                    Err(e) => {
+                        println!("  {name:>14}: FAILED {e}");
+                        losses[k][0] += 1;
+                        ratio_sum[k + 2][ni] += 10.0 / seeds.len() as f64;
+                        continue;
+                    }
+                };
+                let r = eval(&cal, Weighting::Noise);
+                let mut flag = String::new();
+                if r.0 > dn.0.min(dh.0) * 1.01 {
+                    losses[k][0] += 1;
+                    flag += " SKY-LOSS";
+                }
+                if r.1 > 1.05 * dn.1.min(dh.1) + 0.005 {
+                    losses[k][1] += 1;
+                    flag += " GROUND-LOSS";
+                }
+                if (r.2 - orc_sun).abs() > (dn.2 - orc_sun).abs().min((dh.2 - orc_sun).abs()) + 0.1
+                {
+                    losses[k][2] += 1;
+                    flag += " SUN-LOSS";
+                }
+                line(name.as_str(), &r);
+                if !flag.is_empty() {
+                    println!("  {:>14}  {flag}", "");
+                }
+                ratio_sum[k + 2][ni] += r.0 / seeds.len() as f64;
+            }
+        }
+    }
+    let fmt = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x:.3}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    println!("frames {:?}", ns);
+    println!("{:>14}: {}", "default+noise", fmt(&ratio_sum[0]));
+    println!("{:>14}: {}", "default+hat", fmt(&ratio_sum[1]));
+    for (k, (name, _)) in cands.iter().enumerate() {
+        println!(
+            "{name:>14}: {}  losses sky/ground/sun(vs oracle) {:?}",
+            fmt(&ratio_sum[k + 2]),
+            losses[k]
+        );
     }
 }
