@@ -452,15 +452,7 @@ pub fn calibrate(
     let lt = log_times(frames)?;
     check_lambda(opts.lambda)?;
     let samples = sample(frames, circle, &opts.sampling)?;
-    if samples.count() == 0 {
-        let r = &samples.report;
-        return Err(ResponseError::NoSamples {
-            clipped: r.rejected_clipped,
-            edge: r.rejected_edge,
-            non_monotonic: r.rejected_non_monotonic,
-        });
-    }
-    calibrate_samples_with(samples, &lt, opts)
+    fit_drawn(samples, &lt, opts)
 }
 
 /// [`calibrate`] with the samples drawn already (by [`crate::sampling::sample_from`] on what
@@ -475,7 +467,18 @@ pub(crate) fn calibrate_with_samples(
     }
     let lt = log_times(frames)?;
     check_lambda(opts.lambda)?;
-    if samples.positions.is_empty() {
+    fit_drawn(samples, &lt, opts)
+}
+
+/// The fit shared by [`calibrate`] and [`calibrate_with_samples`] once the samples are drawn:
+/// none drawn is an error saying why, else [`calibrate_samples_with`] (every option, the hat's
+/// margin included, so a streamed run fits the same curve as a whole one).
+fn fit_drawn(
+    samples: Samples,
+    lt: &[f64],
+    opts: &CalibrateOptions,
+) -> Result<Calibration, ResponseError> {
+    if samples.count() == 0 {
         let r = &samples.report;
         return Err(ResponseError::NoSamples {
             clipped: r.rejected_clipped,
@@ -483,7 +486,7 @@ pub(crate) fn calibrate_with_samples(
             non_monotonic: r.rejected_non_monotonic,
         });
     }
-    calibrate_samples_fit(samples, &lt, opts.lambda, opts.solver, opts.fit)
+    calibrate_samples_with(samples, lt, opts)
 }
 
 fn check_lambda(lambda: f64) -> Result<(), ResponseError> {

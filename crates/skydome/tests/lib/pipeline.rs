@@ -617,9 +617,10 @@ fn run_watching(frames: Frames, times: &[f64], o: &Options) -> (pipeline::Dome, 
 /// (the scan, then the second pass that gathers the window, the flags and the sampler's
 /// values): the run must give what the whole decoded frames give, bit for bit — the dome, its
 /// header, the pictures, the report and the camera profile — for a 9- and a 3-frame bracket,
-/// the circle detected, with the default calibration, the stratified noise-weighted one and a
-/// camera profile. Without a budget, or with one the bracket fits in, the same encoded photos
-/// are decoded whole (no streaming), with the same bytes.
+/// the circle detected, with the default calibration, the stratified noise-weighted one,
+/// colour-hdri's hat margin, the covering draw and a camera profile. Without a budget, or with
+/// one the bracket fits in, the same encoded photos are decoded whole (no streaming), with the
+/// same bytes.
 #[test]
 fn a_bracket_read_one_frame_at_a_time_gives_the_whole_frames_bytes() {
     use skydome::response::CalibrateOptions;
@@ -641,13 +642,26 @@ fn a_bracket_read_one_frame_at_a_time_gives_the_whole_frames_bytes() {
             ..base.clone()
         };
         let first = run_watching(Frames::Decoded(decoded()), &times, &base).0;
+        // The hat with its ends moved in (colour-hdri's) on the default samples, and the
+        // covering draw: both must reach the streamed fit too.
+        let margin = Options {
+            response: pipeline::ResponseSource::Calibrate(CalibrateOptions {
+                hat_margin: skydome::response::COLOUR_HDRI_HAT_MARGIN,
+                ..CalibrateOptions::default()
+            }),
+            ..base.clone()
+        };
+        let covering = Options {
+            response: pipeline::ResponseSource::Calibrate(CalibrateOptions::covering()),
+            ..base.clone()
+        };
         let profiled = Options {
             response: pipeline::ResponseSource::Profile(
                 first.camera_profile.clone().expect("a profile"),
             ),
             ..base.clone()
         };
-        for o in [&base, &noise, &profiled] {
+        for o in [&base, &noise, &margin, &covering, &profiled] {
             let budget = |b: Option<u64>| Options {
                 frame_memory_budget: b,
                 ..o.clone()
