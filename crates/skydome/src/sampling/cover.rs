@@ -2,7 +2,7 @@
 //! frame and channel, so the curve's ends — the darkest codes of the longest frame, the
 //! brightest unclipped codes of the shortest — are held by data, not by smoothness alone.
 
-use super::{reject_reason, Draws, Lattice, Missing, Reject, SampleOptions};
+use super::{Draws, Lattice};
 
 /// A candidate's state in the covering draw.
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -44,7 +44,6 @@ impl Draws<'_> {
         let mut count = vec![0usize; ncell];
         let mut next = vec![0usize; ncell];
         let mut state = vec![State::Untried; lat.cand.len()];
-        let opts: &SampleOptions = self.opts;
         let mut round = 0usize;
         while self.positions.len() < target {
             round += 1;
@@ -65,24 +64,13 @@ impl Draws<'_> {
                     }
                     let vals = lat.values(k, p);
                     let (x, y) = lat.cand[k];
-                    if opts.reject {
-                        let judged = match reject_reason(self.src, vals, x, y, opts) {
-                            Ok(j) => j,
-                            Err(Missing(m)) => {
-                                self.missing = Some(m);
-                                return;
-                            }
-                        };
-                        if let Some(reason) = judged {
+                    match self.refuses(vals, x, y) {
+                        None => return,
+                        Some(true) => {
                             state[k] = State::Refused;
-                            let r = &mut self.report;
-                            match reason {
-                                Reject::Clipped => r.rejected_clipped += 1,
-                                Reject::Edge => r.rejected_edge += 1,
-                                Reject::NonMonotonic => r.rejected_non_monotonic += 1,
-                            }
                             continue;
                         }
+                        Some(false) => {}
                     }
                     state[k] = State::Taken;
                     self.taken.insert((x, y));

@@ -1155,6 +1155,32 @@ impl Lattice {
 }
 
 impl Draws<'_> {
+    /// Whether the lattice candidate at `(x, y)` with patch means `vals` is refused (counted in
+    /// the report by reason) when [`SampleOptions::reject`] is on; `None` when the source
+    /// lacks pixels it needs (kept in `missing`: sampling stops and asks for them).
+    fn refuses(&mut self, vals: &[[f32; 3]], x: usize, y: usize) -> Option<bool> {
+        if !self.opts.reject {
+            return Some(false);
+        }
+        let reason = match reject_reason(self.src, vals, x, y, self.opts) {
+            Ok(reason) => reason,
+            Err(Missing(m)) => {
+                self.missing = Some(m);
+                return None;
+            }
+        };
+        let Some(reason) = reason else {
+            return Some(false);
+        };
+        let r = &mut self.report;
+        match reason {
+            Reject::Clipped => r.rejected_clipped += 1,
+            Reject::Edge => r.rejected_edge += 1,
+            Reject::NonMonotonic => r.rejected_non_monotonic += 1,
+        }
+        Some(true)
+    }
+
     /// The stratified draw ([`SampleOptions::stratify`]): the lattice's candidates in bands of
     /// the middle frame's mean code, taken one band after another until `target` are kept.
     fn stratified(&mut self, lat: &Lattice, target: usize) {
@@ -1183,23 +1209,10 @@ impl Draws<'_> {
                     any = true;
                     let vals = lat.values(k, p);
                     let (x, y) = lat.cand[k];
-                    if self.opts.reject {
-                        let judged = match reject_reason(self.src, vals, x, y, self.opts) {
-                            Ok(j) => j,
-                            Err(Missing(m)) => {
-                                self.missing = Some(m);
-                                return;
-                            }
-                        };
-                        if let Some(reason) = judged {
-                            let r = &mut self.report;
-                            match reason {
-                                Reject::Clipped => r.rejected_clipped += 1,
-                                Reject::Edge => r.rejected_edge += 1,
-                                Reject::NonMonotonic => r.rejected_non_monotonic += 1,
-                            }
-                            continue;
-                        }
+                    match self.refuses(vals, x, y) {
+                        None => return,
+                        Some(true) => continue,
+                        Some(false) => {}
                     }
                     self.taken.insert((x, y));
                     self.positions.push((x, y));
