@@ -446,11 +446,7 @@ pub fn calibrate(
     circle: Option<Circle>,
     opts: &CalibrateOptions,
 ) -> Result<Calibration, ResponseError> {
-    if frames.len() < 2 {
-        return Err(ResponseError::TooFewFrames(frames.len()));
-    }
-    let lt = log_times(frames)?;
-    check_lambda(opts.lambda)?;
+    let lt = checked_log_times(frames, opts)?;
     let samples = sample(frames, circle, &opts.sampling)?;
     fit_drawn(samples, &lt, opts)
 }
@@ -462,12 +458,19 @@ pub(crate) fn calibrate_with_samples(
     samples: Samples,
     opts: &CalibrateOptions,
 ) -> Result<Calibration, ResponseError> {
+    let lt = checked_log_times(frames, opts)?;
+    fit_drawn(samples, &lt, opts)
+}
+
+/// The checks [`calibrate`] and [`calibrate_with_samples`] make before sampling: two frames
+/// at least, usable exposure times, a usable smoothness weight; the frames' `ln Δt`.
+fn checked_log_times(frames: &[Frame], opts: &CalibrateOptions) -> Result<Vec<f64>, ResponseError> {
     if frames.len() < 2 {
         return Err(ResponseError::TooFewFrames(frames.len()));
     }
     let lt = log_times(frames)?;
     check_lambda(opts.lambda)?;
-    fit_drawn(samples, &lt, opts)
+    Ok(lt)
 }
 
 /// The fit shared by [`calibrate`] and [`calibrate_with_samples`] once the samples are drawn:
