@@ -59,6 +59,8 @@ use crate::decoder::ColorConvert16Ptr;
 mod avx;
 mod neon64;
 mod scalar;
+// skydome patch: WebAssembly SIMD versions (see PATCHED.md).
+mod wasm;
 
 #[allow(unused_variables)]
 pub fn choose_ycbcr_to_rgb_convert_func(
@@ -90,6 +92,16 @@ pub fn choose_ycbcr_to_rgb_convert_func(
                 _ => () // fall through to scalar, which has more types
             };
         }
+    }
+    // skydome patch (see PATCHED.md): simd128 enabled at build time is there at run time.
+    #[cfg(all(target_arch = "wasm32", target_feature = "simd128"))]
+    {
+        use crate::color_convert::wasm::{ycbcr_to_rgb_wasm, ycbcr_to_rgba_wasm};
+        match type_need {
+            ColorSpace::RGB => return Some(ycbcr_to_rgb_wasm),
+            ColorSpace::RGBA => return Some(ycbcr_to_rgba_wasm),
+            _ => () // fall through to scalar, which has more types
+        };
     }
     // when there is no x86 or we haven't returned by here, resort to scalar
     return match type_need {

@@ -37,13 +37,19 @@ use zune_core::log::debug;
 use zune_core::options::DecoderOptions;
 
 use crate::decoder::IDCTPtr;
+// skydome patch: with wasm simd128 the scalar IDCT is unused outside tests (see PATCHED.md).
+#[cfg_attr(all(target_arch = "wasm32", target_feature = "simd128"), allow(unused_imports))]
 use crate::idct::scalar::{idct_int, idct_int_1x1};
 
 #[cfg(feature = "x86")]
 pub mod avx2;
 #[cfg(feature = "neon")]
 pub mod neon;
+// skydome patch: WebAssembly SIMD versions (see PATCHED.md).
+#[cfg(all(target_arch = "wasm32", target_feature = "simd128"))]
+pub mod wasm;
 
+#[cfg_attr(all(target_arch = "wasm32", target_feature = "simd128"), allow(dead_code))]
 pub mod scalar;
 
 /// Choose an appropriate IDCT function
@@ -71,9 +77,15 @@ pub fn choose_idct_func(options: &DecoderOptions) -> IDCTPtr {
             };
         }
     }
+    // skydome patch (see PATCHED.md): simd128 enabled at build time is there at run time (an
+    // engine without it refuses the whole module).
+    #[cfg(all(target_arch = "wasm32", target_feature = "simd128"))]
+    let generic: IDCTPtr = wasm::idct_wasm;
+    #[cfg(not(all(target_arch = "wasm32", target_feature = "simd128")))]
+    let generic: IDCTPtr = idct_int;
     debug!("Using scalar integer IDCT");
     // use generic one
-    return idct_int;
+    return generic;
 }
 
 /// Choose a function to implement 4x4 IDCT.
@@ -95,12 +107,22 @@ pub fn choose_idct_4x4_func(_options: &DecoderOptions) -> IDCTPtr {
         }
     }
 
-    scalar::idct4x4
+    // skydome patch (see PATCHED.md).
+    #[cfg(all(target_arch = "wasm32", target_feature = "simd128"))]
+    let generic: IDCTPtr = wasm::idct_wasm_4x4;
+    #[cfg(not(all(target_arch = "wasm32", target_feature = "simd128")))]
+    let generic: IDCTPtr = scalar::idct4x4;
+    generic
 }
 
 pub fn choose_idct_1x1_func(_: &DecoderOptions) -> IDCTPtr {
     // These are simple stores, no alternative implementation for now
-    idct_int_1x1
+    // skydome patch (see PATCHED.md): in wasm the scalar fill costs ~5 % of a decode.
+    #[cfg(all(target_arch = "wasm32", target_feature = "simd128"))]
+    let generic: IDCTPtr = wasm::idct_wasm_1x1;
+    #[cfg(not(all(target_arch = "wasm32", target_feature = "simd128")))]
+    let generic: IDCTPtr = idct_int_1x1;
+    generic
 }
 
 #[cfg(test)]
