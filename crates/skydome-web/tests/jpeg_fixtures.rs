@@ -56,7 +56,12 @@ fn cases() -> Vec<Case> {
         },
         Case {
             progressive: true,
-            ..case("rgb420_progressive_160x120", 160, 120, SamplingFactor::F_2_2)
+            ..case(
+                "rgb420_progressive_160x120",
+                160,
+                120,
+                SamplingFactor::F_2_2,
+            )
         },
         Case {
             progressive: true,
@@ -91,7 +96,8 @@ fn picture(w: usize, h: usize) -> Vec<[u8; 3]> {
         for x in 0..w {
             let (fx, fy) = (x as f64 / w as f64, y as f64 / h as f64);
             let noise = {
-                let mut s = (x as u32).wrapping_mul(0x9E37_79B1) ^ (y as u32).wrapping_mul(0x85EB_CA77);
+                let mut s =
+                    (x as u32).wrapping_mul(0x9E37_79B1) ^ (y as u32).wrapping_mul(0x85EB_CA77);
                 s ^= s >> 15;
                 s = s.wrapping_mul(0x2C1B_3C6D);
                 s ^= s >> 12;
@@ -156,7 +162,10 @@ fn fnv1a64(bytes: &[u8]) -> String {
 }
 
 fn fixtures_dir() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../web-tests/fixtures/jpeg"))
+    PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../web-tests/fixtures/jpeg"
+    ))
 }
 
 #[test]
@@ -183,7 +192,10 @@ fn native_decodes_of_the_jpeg_fixtures_match_their_digests() {
         let meta: serde_json::Value = serde_json::from_str(&meta).expect("meta");
         assert_eq!(meta["width"], c.width, "{file}");
         assert_eq!(meta["height"], c.height, "{file}");
-        assert_eq!(pixels.len(), 3 * usize::from(c.width) * usize::from(c.height));
+        assert_eq!(
+            pixels.len(),
+            3 * usize::from(c.width) * usize::from(c.height)
+        );
         digests.insert(
             file,
             serde_json::json!({ "width": c.width, "height": c.height, "fnv1a64": fnv1a64(&pixels) }),
@@ -214,7 +226,11 @@ fn the_jpeg_fixtures_have_the_layouts_they_are_named_after() {
         let components = bytes[sof + 9];
         assert_eq!(components, if c.grey { 1 } else { 3 }, "{}", c.name);
         let luma_sampling = bytes[sof + 11];
-        let expected = if c.grey { 0x11 } else { c.sampling as u8 & 0x7F };
+        let expected = if c.grey {
+            0x11
+        } else {
+            c.sampling as u8 & 0x7F
+        };
         assert_eq!(luma_sampling, expected, "{}", c.name);
         let has_restart = bytes.windows(2).any(|m| m == [0xFF, 0xDD]);
         assert_eq!(has_restart, c.restart > 0, "{}", c.name);
