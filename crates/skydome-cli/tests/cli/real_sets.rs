@@ -261,7 +261,7 @@ fn ssarcandy_merges_with_measured_exposures() {
         ],
         &tmp.path().join("street"),
     );
-    let e = &s["report"]["exposures"];
+    let e = &s["exposures"];
     assert_eq!(e["source"], "measured", "{e}");
     let frames = e["frames"].as_array().unwrap();
     assert_eq!(frames.len(), 11);
@@ -277,8 +277,8 @@ fn ssarcandy_merges_with_measured_exposures() {
     let anchor = e["anchor"].as_str().unwrap();
     let a = frames.iter().find(|f| f["file"] == anchor).unwrap();
     assert_eq!(a["measured_s"], a["listed_s"], "{a}");
-    assert_eq!(s["report"]["frames"].as_array().unwrap().len(), 8);
-    let warnings = s["report"]["warnings"].to_string();
+    assert_eq!(s["frames"].as_array().unwrap().len(), 8);
+    let warnings = s["warnings"].to_string();
     assert!(
         warnings.contains("disagree with their listed exposure times")
             && warnings.contains("DSC_0100.png")
