@@ -544,11 +544,13 @@ pub fn real_sets() -> Option<Vec<(&'static str, Vec<skydome::bracket::Frame>)>> 
     )
 }
 
+/// A real set's name, frames and which neighbouring pairs carry the same picture.
+pub type MeasuringSet = (&'static str, Vec<skydome::bracket::Frame>, Vec<bool>);
+
 /// [`real_sets`] as a measured merge reads them ([`assemble_for_measuring`]): the frames (all
 /// of them, ssarcandy_street's four frames of one picture too) and, per neighbouring pair,
 /// whether the two carry the same picture.
-pub fn real_sets_for_measuring(
-) -> Option<Vec<(&'static str, Vec<skydome::bracket::Frame>, Vec<bool>)>> {
+pub fn real_sets_for_measuring() -> Option<Vec<MeasuringSet>> {
     use skydome::bracket::{assemble_for_measuring, decode, DecodeOptions, OrientationPolicy};
     let d = common::data_dir()?;
     let room = [
