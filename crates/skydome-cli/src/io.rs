@@ -95,6 +95,7 @@ pub fn hint(e: PipelineError) -> anyhow::Error {
             " (the EXIF times, or --times / --times-file in file order)"
         }
         PipelineError::Bracket(B::OrientationMismatch { .. }) => " (use --orientation ignore)",
+        PipelineError::Bracket(B::IdenticalPixels { .. }) => " (--exposures measured)",
         PipelineError::CircleNotFound { .. } => " with --circle CX,CY,R",
         PipelineError::NoEphemeris => " (--time, --lat, --lon)",
         PipelineError::NeedsLens(_) => " (--lens lens.json or --fisheye)",

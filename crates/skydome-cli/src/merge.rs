@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use skydome::camera::CameraProfile;
+use skydome::exposures::ExposureSource;
 use skydome::image::PixelPoint;
 use skydome::merge::Weighting;
 use skydome::photometry::{Reference, SpotLuminance};
@@ -94,6 +95,15 @@ pub struct PipelineArgs {
     /// unweighted eq. 4).
     #[arg(long, default_value = "hat", value_parser = parse_weighting)]
     pub weighting: Weighting,
+    /// Which exposures calibrate and merge: `listed` (EXIF, --times or --times-file, as given;
+    /// default), checked against the photos, with a warning naming every frame more than 1/3
+    /// stop off; or `measured`: each frame's exposure measured from the photos (the ratio of
+    /// neighbouring frames over the pixels well exposed in both, alternating with the curve
+    /// fit), anchored on the listed time of the frame that agrees best with the others (said
+    /// in the report). For EXIF-rounded times, a mistyped list, or a camera that ignored part
+    /// of the bracket (frames of one picture are one exposure; one of each is merged).
+    #[arg(long, default_value = "listed", value_parser = parse_exposures)]
+    pub exposures: ExposureSource,
     /// The UTC offset (+02:00, -05:00, Z) the camera's clock (EXIF DateTimeOriginal) is read
     /// in, for cameras that write no OffsetTimeOriginal; it overrides EXIF's offset.
     #[arg(long, value_name = "OFFSET", allow_hyphen_values = true)]
@@ -134,6 +144,7 @@ impl PipelineArgs {
             response,
             calibration_circle: self.calib.circle,
             weighting: self.weighting,
+            exposures: self.exposures,
             black_level: self.black_level,
             align: self.align,
             consistency: false,
@@ -155,6 +166,11 @@ impl PipelineArgs {
 
 /// Parses a merge weighting name.
 fn parse_weighting(s: &str) -> Result<Weighting, String> {
+    s.parse().map_err(|e: skydome::UnknownName| e.to_string())
+}
+
+/// Parses an exposure source name.
+fn parse_exposures(s: &str) -> Result<ExposureSource, String> {
     s.parse().map_err(|e: skydome::UnknownName| e.to_string())
 }
 
@@ -343,6 +359,16 @@ fn print_summary(r: &Report, written: &[String]) {
         r.height,
         r.response
     ));
+    if let Some(e) = r
+        .exposures
+        .as_ref()
+        .filter(|e| e.source == ExposureSource::Measured)
+    {
+        crate::out(&format!(
+            "exposures measured from the photos, anchored on the listed time of {}",
+            e.anchor
+        ));
+    }
     let c = &r.capture;
     if c.time_utc.is_some() || c.latitude_deg.is_some() {
         crate::out(&format!(

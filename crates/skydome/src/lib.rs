@@ -11,7 +11,7 @@
 //! image, fastmath   pixels, circles, the bilinear sampler, luminance; fast maths
 //!   ─▶ bracket   decoding, EXIF (lenient with piexif's), exposure times, the bracket's checks
 //!   ─▶ align   translation of hand-held frames
-//!   ─▶ sampling ─▶ response   calibration samples; response curves (Debevec & Malik)
+//!   ─▶ sampling ─▶ response ─▶ exposures   calibration samples; response curves (Debevec & Malik); exposures measured from the photos
 //!   ─▶ fisheye   lens circle, projections, lens profile and vignetting (flat fields need the response)
 //!   ─▶ noise ─▶ merge   the camera noise model; the HDR merge
 //!   ─▶ camera   the camera profile: response, noise model and weighting in one JSON
@@ -73,6 +73,7 @@ pub mod batch;
 pub mod bracket;
 pub mod camera;
 pub mod compare;
+pub mod exposures;
 mod fastmath;
 pub mod fisheye;
 pub mod formats;

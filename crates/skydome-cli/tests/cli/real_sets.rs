@@ -223,7 +223,8 @@ fn ssarcandy_three_column_list_is_read_and_the_ignored_bracket_refused() {
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(
-        err.contains("the camera probably ignored the bracket"),
+        err.contains("the camera probably ignored the bracket")
+            && err.contains("--exposures measured"),
         "{err}"
     );
     // Every frame that duplicates another is named (four of them carry one exposure), and no
@@ -233,4 +234,55 @@ fn ssarcandy_three_column_list_is_read_and_the_ignored_bracket_refused() {
         assert_eq!(named, (97..=100).contains(&i), "DSC_{i:04}.png: {err}");
     }
     assert!(!out.exists());
+}
+
+/// The street set with `--exposures measured`: the four frames of one picture (DSC_0097–0100)
+/// are one exposure and one of them is merged, every frame's listed and measured time is in
+/// the report, the anchor keeps its listed time, and the frames whose listed times are wrong
+/// are named in a warning.
+#[test]
+fn ssarcandy_merges_with_measured_exposures() {
+    let Some(data) = data_dir() else {
+        return;
+    };
+    let dir = data.join("ssarcandy_street");
+    let tmp = tempfile::tempdir().unwrap();
+    let list = dir.join("image_list.txt");
+    let files: Vec<String> = (92..=102).map(|i| format!("DSC_{i:04}.png")).collect();
+    let files: Vec<&str> = files.iter().map(String::as_str).collect();
+    let s = merge_set(
+        &dir,
+        &files,
+        &[
+            "--times-file",
+            list.to_str().unwrap(),
+            "--exposures",
+            "measured",
+        ],
+        &tmp.path().join("street"),
+    );
+    let e = &s["exposures"];
+    assert_eq!(e["source"], "measured", "{e}");
+    let frames = e["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 11);
+    for f in frames {
+        let name = f["file"].as_str().unwrap();
+        let i: u32 = name[name.len() - 8..name.len() - 4].parse().unwrap();
+        let same = f["same_as"].as_str();
+        assert_eq!(same.is_some(), (98..=100).contains(&i), "{name}: {f}");
+        if let Some(first) = same {
+            assert!(first.ends_with("DSC_0097.png"), "{f}");
+        }
+    }
+    let anchor = e["anchor"].as_str().unwrap();
+    let a = frames.iter().find(|f| f["file"] == anchor).unwrap();
+    assert_eq!(a["measured_s"], a["listed_s"], "{a}");
+    assert_eq!(s["frames"].as_array().unwrap().len(), 8);
+    let warnings = s["warnings"].to_string();
+    assert!(
+        warnings.contains("disagree with their listed exposure times")
+            && warnings.contains("DSC_0100.png")
+            && warnings.contains("anchored on the listed time of"),
+        "{warnings}"
+    );
 }

@@ -33,7 +33,21 @@ pub fn assemble_with_black_level(
     orientation: OrientationPolicy,
     black_level: u8,
 ) -> Result<Bracket, BracketError> {
-    assemble_impl(decoded, times, orientation, black_level, false)
+    assemble_impl(decoded, times, orientation, black_level, false, false).map(|(b, _)| b)
+}
+
+/// [`assemble_with_black_level`] for a bracket whose exposures are then measured from the photos
+/// ([`crate::exposures`]): neighbours that carry the same picture are not refused (they are
+/// one exposure, whatever their listed times say), and are not judged darker when longer.
+/// Returns the bracket and, per neighbouring pair of its frames (`k`, `k + 1`), whether the two
+/// carry the same picture.
+pub fn assemble_for_measuring(
+    decoded: Vec<DecodedFrame>,
+    times: Option<&[f64]>,
+    orientation: OrientationPolicy,
+    black_level: u8,
+) -> Result<(Bracket, Vec<bool>), BracketError> {
+    assemble_impl(decoded, times, orientation, black_level, false, true)
 }
 
 /// [`assemble_with_black_level`] on frames that are already oriented and carry only every
@@ -48,7 +62,7 @@ pub(crate) fn assemble_thumbnails(
     orientation: OrientationPolicy,
     black_level: u8,
 ) -> Result<Bracket, BracketError> {
-    assemble_impl(decoded, times, orientation, black_level, true)
+    assemble_impl(decoded, times, orientation, black_level, true, false).map(|(b, _)| b)
 }
 
 /// The samples of every 7th pixel (pixels 0, 7, 14, … in row-major order, all three channels)
@@ -64,7 +78,8 @@ fn assemble_impl(
     orientation: OrientationPolicy,
     black_level: u8,
     thumbs: bool,
-) -> Result<Bracket, BracketError> {
+    keep_identical: bool,
+) -> Result<(Bracket, Vec<bool>), BracketError> {
     at_least_two(decoded.len())?;
     if let Some(t) = times {
         one_valid_time_per_frame(t, decoded.len())?;
@@ -77,19 +92,29 @@ fn assemble_impl(
     // Identical first: frames that carry the same picture wherever both show one are the same
     // scene, whatever a few moving blocks say (a camera that ignored the bracket while
     // something changed in a corner would otherwise be called two scenes).
-    no_identical_neighbours(&frames, &checks)?;
+    let mut checks = checks;
+    if keep_identical {
+        // One picture is one exposure: nothing to refuse, and no order to judge.
+        for c in checks.iter_mut().filter(|c| c.identical) {
+            c.darker_when_longer = false;
+        }
+    } else {
+        no_identical_neighbours(&frames, &checks)?;
+    }
     one_scene(&frames, &checks)?;
     no_frame_darker_when_exposed_longer(&frames, &checks)?;
+    let identical = checks.iter().map(|c| c.identical).collect();
     let pixel_orientation = match orientation {
         OrientationPolicy::Apply => 1,
         OrientationPolicy::Ignore => info.orientation,
     };
-    Ok(Bracket {
+    let bracket = Bracket {
         frames,
         info,
         warnings,
         pixel_orientation,
-    })
+    };
+    Ok((bracket, identical))
 }
 
 /// A bracket needs two frames at least.

@@ -33,7 +33,7 @@ pub mod tiff;
 mod times;
 
 pub use camera_raw::camera_raw_kind;
-pub use checks::{assemble, assemble_with_black_level};
+pub use checks::{assemble, assemble_for_measuring, assemble_with_black_level};
 pub(crate) use checks::{assemble_thumbnails, every_7th_pixel};
 pub(crate) use decode::orient;
 pub use decode::{check_jpeg_complete, decode, decode_raw};
@@ -493,7 +493,7 @@ pub enum BracketError {
         pairs: Vec<NamedPair>,
     },
     /// Two frames whose pixels are (nearly) identical although metadata says otherwise.
-    #[error("{}: pixels are nearly identical although their exposures differ by up to {stops:.2} stops; the camera probably ignored the bracket (auto-ISO or auto-exposure on): retake them, or keep one of each group", .groups.iter().map(|g| and_list(g)).collect::<Vec<_>>().join("; "))]
+    #[error("{}: pixels are nearly identical although their exposures differ by up to {stops:.2} stops; the camera probably ignored the bracket (auto-ISO or auto-exposure on): retake them, keep one of each group, or merge with the exposures measured from the photos", .groups.iter().map(|g| and_list(g)).collect::<Vec<_>>().join("; "))]
     IdenticalPixels {
         /// Runs of neighbouring frames (in exposure order) that carry the same picture.
         groups: Vec<Vec<String>>,

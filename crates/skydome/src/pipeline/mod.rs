@@ -37,6 +37,7 @@ use std::ops::ControlFlow;
 use crate::align::{self, AlignOptions, Alignment};
 use crate::bracket::{self, Bracket, BracketError, DecodeOptions, DecodedFrame, RawColour};
 use crate::camera::CameraProfile;
+use crate::exposures::{self, ExposureReport, ExposureSource};
 use crate::fisheye::{self, CircleFit, FisheyeError, LensProfile};
 use crate::formats::picture::{grey_picture, PictureError};
 use crate::formats::{HdrMeta, ABSOLUTE_UNITS_LINE};
@@ -147,13 +148,15 @@ pub fn run(
         match stream::intake(&input, options, &mut progress)? {
             Some(s) => (s.br, None, None, s.lens, s.calibrated, Some(s.prepared)),
             None => {
-                let (mut br, raw) = read_bracket(input, options.black_level, &mut progress)?;
+                let measuring = options.exposures == ExposureSource::Measured;
+                let (mut br, raw, same) =
+                    read_bracket_as(input, options.black_level, measuring, &mut progress)?;
                 let alignment = options.align.then(|| align_frames(&mut br));
                 let lens = lens_stage(&options.lens, &br, &mut progress)?;
                 let lens_circle = lens.as_ref().map(|(l, _)| l.circle);
                 let calibrated = match &raw {
-                    Some(_) => linear_response(),
-                    None => response_stage(options, &br, lens_circle, &mut progress)?,
+                    Some(_) => linear_response(options.exposures),
+                    None => response_stage(options, &mut br, &same, lens_circle, &mut progress)?,
                 };
                 (br, raw, alignment, lens, calibrated, None)
             }
@@ -260,6 +263,7 @@ pub fn run(
         width: radiance.width,
         height: radiance.height,
         frames: br.frames.iter().map(FrameSummary::of).collect(),
+        exposures: calibrated.exposures,
         response: calibrated.from.to_string(),
         sampling: calibrated.sampling,
         clipped_high_pixels: merged.clipped_high,
@@ -330,41 +334,77 @@ struct Calibrated {
     /// Where the response came from, for the report.
     from: &'static str,
     warnings: Vec<String>,
+    /// The listed exposures against those measured from the photos.
+    exposures: Option<ExposureReport>,
 }
 
-/// A RAW bracket's response: linear by construction, nothing to fit.
-fn linear_response() -> Calibrated {
+/// A RAW bracket's response: linear by construction, nothing to fit. Its listed exposures are
+/// used (measured ones are not offered for RAW yet: said in a warning when asked for).
+fn linear_response(exposures: ExposureSource) -> Calibrated {
+    let warnings = match exposures {
+        ExposureSource::Listed => Vec::new(),
+        ExposureSource::Measured => {
+            vec!["exposures are not measured from RAW frames: the listed times were used".into()]
+        }
+    };
     Calibrated {
         response: Response::linear(),
         profile: None,
         sampling: None,
         from: "linear (RAW)",
-        warnings: Vec::new(),
+        warnings,
+        exposures: None,
     }
 }
 
 /// The response stage: the camera profile's response, or a calibration on these frames,
-/// sampled inside [`Options::calibration_circle`] or else the lens circle.
+/// sampled inside [`Options::calibration_circle`] or else the lens circle; and the exposures
+/// ([`Options::exposures`]): the listed ones checked against those the photos give on that
+/// response, or the measured ones put into the bracket (one frame of each exposure kept), the
+/// calibration alternating with the measurement ([`exposures::calibrate_measuring`]). `same`
+/// says which neighbouring frames carry the same picture (only when measuring).
 fn response_stage(
     options: &Options,
-    br: &Bracket,
+    br: &mut Bracket,
+    same: &[bool],
     lens_circle: Option<Circle>,
     progress: &mut Reporter<'_>,
 ) -> Result<Calibrated, PipelineError> {
     let circle = options.calibration_circle.or(lens_circle);
+    let black = options.black_level;
+    let source = options.exposures;
     progress.at(Stage::Calibrating, 0.0)?;
-    let calibrated = match &options.response {
-        ResponseSource::Profile(prof) => Calibrated {
-            response: prof.response()?,
-            profile: None,
-            sampling: None,
-            from: "profile",
-            warnings: Vec::new(),
-        },
-        ResponseSource::Calibrate(o) => {
-            calibrated_on(response::calibrate(&br.frames, circle, o)?, br)
+    let (mut calibrated, measurement, rounds) = match (&options.response, source) {
+        (ResponseSource::Profile(prof), _) => {
+            let response = prof.response()?;
+            let m = exposures::measure(&br.frames, &response, black, same);
+            let c = Calibrated {
+                response,
+                profile: None,
+                sampling: None,
+                from: "profile",
+                warnings: Vec::new(),
+                exposures: None,
+            };
+            (c, m, 0)
+        }
+        (ResponseSource::Calibrate(o), ExposureSource::Listed) => {
+            let cal = response::calibrate(&br.frames, circle, o)?;
+            let m = exposures::measure(&br.frames, &cal.response, black, same);
+            (calibrated_on(cal, br), m, 0)
+        }
+        (ResponseSource::Calibrate(o), ExposureSource::Measured) => {
+            let (cal, m, rounds) =
+                exposures::calibrate_measuring(&mut br.frames, same, circle, o, black)?;
+            (calibrated_on(cal, br), m, rounds)
         }
     };
+    let report = exposures::report(&br.frames, &measurement, source, rounds);
+    calibrated.warnings.extend(report.warnings());
+    if source == ExposureSource::Measured {
+        exposures::apply(&mut br.frames, &measurement);
+    }
+    calibrated.exposures = Some(report);
     progress.at(Stage::Calibrating, 1.0)?;
     Ok(calibrated)
 }
@@ -386,6 +426,7 @@ fn calibrated_on(cal: response::Calibration, br: &Bracket) -> Calibrated {
         warnings: warnings.into_iter().flatten().collect(),
         sampling: Some(sampling),
         from: "calibrated on this bracket",
+        exposures: None,
     }
 }
 
@@ -991,6 +1032,18 @@ fn read_bracket(
     black_level: u8,
     p: &mut Reporter<'_>,
 ) -> Result<(Bracket, Option<RawColour>), PipelineError> {
+    read_bracket_as(input, black_level, false, p).map(|(b, raw, _)| (b, raw))
+}
+
+/// [`read_bracket`]; with `measuring` (exposures measured from the photos), neighbours that
+/// carry the same picture are kept ([`bracket::assemble_for_measuring`]), and the third value
+/// says which neighbouring pairs do (all `false` otherwise).
+fn read_bracket_as(
+    input: Input,
+    black_level: u8,
+    measuring: bool,
+    p: &mut Reporter<'_>,
+) -> Result<(Bracket, Option<RawColour>, Vec<bool>), PipelineError> {
     p.at(Stage::Decoding, 0.0)?;
     let (decoded, raw) = match input.frames {
         Frames::Decoded(d) => (d, None),
@@ -1001,14 +1054,17 @@ fn read_bracket(
         Some(_) => bracket::OrientationPolicy::Ignore,
         None => input.orientation,
     };
-    let br = bracket::assemble_with_black_level(
-        decoded,
-        input.times.as_deref(),
-        orientation,
-        black_level,
-    )?;
+    let times = input.times.as_deref();
+    let (br, same) = match measuring && raw.is_none() {
+        true => bracket::assemble_for_measuring(decoded, times, orientation, black_level)?,
+        false => {
+            let br = bracket::assemble_with_black_level(decoded, times, orientation, black_level)?;
+            let same = vec![false; br.frames.len().saturating_sub(1)];
+            (br, same)
+        }
+    };
     p.at(Stage::Decoding, 1.0)?;
-    Ok((br, raw))
+    Ok((br, raw, same))
 }
 
 /// Decodes frames, a few at a time (in parallel with the `parallel` feature), reporting after

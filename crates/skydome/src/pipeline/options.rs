@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::bracket::{DecodeOptions, DecodedFrame, OrientationPolicy};
 use crate::camera::CameraProfile;
+use crate::exposures::ExposureSource;
 use crate::fisheye::{LensKind, LensProfile};
 use crate::image::{Circle, PixelPoint};
 use crate::merge::Weighting;
@@ -224,6 +225,13 @@ pub struct Options {
     pub calibration_circle: Option<Circle>,
     /// Frame weighting of the merge.
     pub weighting: Weighting,
+    /// Which exposures calibrate and merge: the listed times (EXIF or [`Input::times`],
+    /// checked against the photos: a frame more than 1/3 stop off is named in a warning), or
+    /// the exposures measured from the photos ([`crate::exposures`]), anchored on the listed
+    /// time of the frame that agrees best with the others; frames that carry the same picture
+    /// are then one exposure, and one of each is merged. Not for RAW brackets (their listed
+    /// times are used and checked).
+    pub exposures: ExposureSource,
     /// Black level of the frames, 8-bit code (0 for most cameras, ≈ 16 for film scans): codes
     /// at or below count as black.
     pub black_level: u8,

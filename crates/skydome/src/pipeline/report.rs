@@ -6,6 +6,7 @@ use super::{CaptureReport, GeometryReport};
 use crate::align::Alignment;
 use crate::bracket::{Frame, RawColour};
 use crate::camera::CameraProfile;
+use crate::exposures::ExposureReport;
 use crate::fisheye::LensProfile;
 use crate::formats::HdrMeta;
 use crate::image::{HdrImage, RgbImage};
@@ -37,8 +38,13 @@ pub struct Report {
     pub width: usize,
     /// Output height, pixels.
     pub height: usize,
-    /// The frames, shortest exposure first.
+    /// The frames merged, shortest exposure first (with measured exposures: their measured
+    /// times, one frame of each exposure).
     pub frames: Vec<FrameSummary>,
+    /// Every frame's listed exposure against the one measured from the photos, and which the
+    /// merge used (not for RAW brackets or a bracket read one photo at a time).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exposures: Option<ExposureReport>,
     /// Where the response came from: "profile" or "calibrated on this bracket".
     pub response: String,
     /// What calibration sampling did, when it calibrated.

@@ -31,6 +31,7 @@
 //! decoded at once would exceed it ([`streams_input`]).
 
 use crate::bracket::{self, Bracket, DecodedFrame, Exposure, OrientationPolicy, Pixels};
+use crate::exposures::ExposureSource;
 use crate::fisheye::{self, CircleFit, LensProfile};
 use crate::merge::{ClippedFlags, BLACK, CLIPPED_HIGH, CLIPPED_LOW};
 use crate::pipeline::options::{AbsoluteMode, EncodedFrame, Frames, Input, LensSource};
@@ -84,6 +85,8 @@ pub fn streams(options: &Options) -> bool {
         matches!(&options.response, ResponseSource::Calibrate(c) if c.sampling.histogram);
     plain_crop(options)
         && !options.align
+        // Measuring exposures reads every frame's pixels against the others'.
+        && options.exposures == ExposureSource::Listed
         && relative
         && !histogram
         && options.lens != LensSource::None
@@ -286,6 +289,7 @@ pub(super) fn intake(
                     sampling: None,
                     from: "profile",
                     warnings: Vec::new(),
+                    exposures: None,
                 },
                 Err(_) => return Ok(None),
             },

@@ -23,6 +23,7 @@ mod calibration;
 mod capture;
 mod curve_range;
 mod exif_stations;
+mod exposures;
 mod film_scan;
 mod fisheye;
 mod fisheye_overlay;
