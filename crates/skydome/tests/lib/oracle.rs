@@ -843,14 +843,15 @@ fn calibration_candidates() {
                 if let Some(ratio) = choose {
                     let lt = &cal.log_times;
                     let mut curves = cal.response.curves().clone();
-                    for ch in 0..3 {
-                        let mc = toe_consistency(&cal.samples, lt, &curves[ch], ch);
-                        let md = toe_consistency(&cal.samples, lt, &def.response.curves()[ch], ch);
-                        let md2 = toe_consistency(&def.samples, lt, &def.response.curves()[ch], ch);
-                        let mc2 = toe_consistency(&def.samples, lt, &curves[ch], ch);
-                        println!("    ch {ch}: toe consistency on covering samples: covering {mc:.3} grid {md:.3}; on grid samples: covering {mc2:.3} grid {md2:.3}");
+                    for (ch, curve) in curves.iter_mut().enumerate() {
+                        let grid = &def.response.curves()[ch];
+                        let mc = toe_consistency(&cal.samples, lt, curve, ch);
+                        let md = toe_consistency(&cal.samples, lt, grid, ch);
+                        let md2 = toe_consistency(&def.samples, lt, grid, ch);
+                        let mc2 = toe_consistency(&def.samples, lt, curve, ch);
+                        println!("    ch {ch}: toe consistency on the candidate's samples: candidate {mc:.3} default {md:.3}; on the default's samples: candidate {mc2:.3} default {md2:.3}");
                         if md * ratio < mc {
-                            curves[ch] = def.response.curves()[ch].clone();
+                            *curve = grid.clone();
                         }
                     }
                     cal.response = skydome::response::Response::from_curves(curves).unwrap();
