@@ -1,16 +1,14 @@
-//! The noise-aware merge of 8-bit frames in one vector sweep: the hat's estimate and its
-//! refinement ([`Refine`]) for eight samples at a time, with AVX2 gathers for the table
-//! look-ups, chosen at run time (`is_x86_feature_detected!`). It gives the same bits as the
-//! scalar path ([`merge_band`](super::hat)'s hat pass, then [`refine_row`](super::refine)):
-//! the same `f32` operations in the same order on every sample, no fused multiply-add.
+//! The noise-aware merge of 8-bit frames in one vector sweep: the first estimate, the weight
+//! row and the weighted mean of [`Refine`] for eight samples at a time, with AVX2 gathers for
+//! the table look-ups, chosen at run time (`is_x86_feature_detected!`). It gives the same bits
+//! as the scalar path ([`refine_row`](super::refine)): the same `f32` operations in the same
+//! order on every sample, no fused multiply-add.
 //!
-//! Why it pays: the scalar path looks every code up twice (the hat's table, then the vote
-//! table), writes the hat's estimate, its weight-row index and two sums per sample to memory
-//! and reads them back, and its look-ups are scalar loads that the compiler moves into vector
-//! lanes one by one. Here each frame's vote is gathered once and serves both passes; the hat's
-//! weight and the observed-code factor come from the code by arithmetic (a min, compares, and a
-//! 16-entry in-register table), so a sample costs one gather per frame for its vote and one per
-//! frame for its weight row; nothing but the result goes back to memory.
+//! Per eight samples: one gather per frame for its votes, the first estimate by selects over
+//! the codes already in registers, one weight row per sample (one 16-byte load each and a
+//! transpose up to four frames, one gather per frame beyond), the observed-code factor by
+//! arithmetic on the code (a min, compares and a 16-entry in-register table), and nothing but
+//! the result goes back to memory.
 //!
 //! The arithmetic stands in for table entries, so [`Fused::new`] checks it against the scalar
 //! path's tables for every frame, channel and code and declines (the scalar path runs) on any
@@ -36,6 +34,8 @@ pub(super) struct Fused {
     fade: [f32; 16],
     /// Codes at or below it get no weight.
     black: i32,
+    /// [`Refine::select`]: the first estimate is the longest frame's vote with a code below it.
+    select: i32,
     /// [`Refine`]'s weight rows, `frames` values a row.
     rows: Vec<f32>,
     /// Per channel: [`Refine`]'s bin offset, last bin and first row.
@@ -45,15 +45,11 @@ pub(super) struct Fused {
 }
 
 impl Fused {
-    /// The kernel's tables for the refinement `r` of 8-bit frames whose hat pass uses `hat`
-    /// (per frame, channel and code `[w, w · log2 E_j]`), or `None` when the CPU has no AVX2,
-    /// the input is not 8-bit, the frame count is beyond [`MAX_FRAMES`], or the kernel's
-    /// arithmetic would give any weight other than the tables' (see the module docs).
-    pub(super) fn new<const N: usize>(
-        r: &Refine<N>,
-        hat: impl Fn(usize, usize, usize) -> [f32; 2],
-        black: u8,
-    ) -> Option<Self> {
+    /// The kernel's tables for the noise-aware merge `r` of 8-bit frames, or `None` when the
+    /// CPU has no AVX2, the input is not 8-bit, the frame count is beyond [`MAX_FRAMES`], or
+    /// the kernel's arithmetic would give any factor other than the tables' (see the module
+    /// docs).
+    pub(super) fn new<const N: usize>(r: &Refine<N>, black: u8) -> Option<Self> {
         if N != 256 || !(1..=MAX_FRAMES).contains(&r.frames) || !available() {
             return None;
         }
@@ -68,23 +64,18 @@ impl Fused {
             votes: (0..p * 3 * N).map(|i| r.votes[i][0]).collect(),
             fade,
             black: black as i32,
+            select: r.select as i32,
             // Padded for the kernel's 16-byte loads of a row (see `avx2::run`).
             rows: r.rows.iter().copied().chain([0.0; 3]).collect(),
             off: r.off,
             last: r.last,
             start: r.start,
         };
-        // Every weight the kernel computes must be the table's, bit for bit.
+        // Every factor the kernel computes must be the table's, bit for bit.
         for j in 0..p {
             for c in 0..3 {
                 for z in 0..N {
-                    let [vote, f] = entry(j, c, z);
-                    let w = hat_weight(j, p, z as u8);
-                    let want = hat(j, c, z);
-                    if fused.factor(z as u8).to_bits() != f.to_bits()
-                        || w.to_bits() != want[0].to_bits()
-                        || (w * vote).to_bits() != want[1].to_bits()
-                    {
+                    if fused.factor(z as u8).to_bits() != entry(j, c, z)[1].to_bits() {
                         return None;
                     }
                 }
@@ -127,22 +118,6 @@ impl Fused {
             0
         }
     }
-}
-
-/// The hat weight of code `z` in frame `j` of `p` as the kernel computes it: the same as
-/// [`weight`](super::hat::weight) for 8-bit codes under the hat (checked by [`Fused::new`]).
-fn hat_weight(j: usize, p: usize, z: u8) -> f32 {
-    let mut w = z.min(255 - z) as f32;
-    if j == 0 && z >= 128 {
-        w = super::hat::W_MAX;
-    }
-    if j + 1 == p && z <= 127 {
-        w = super::hat::W_MAX;
-    }
-    if j == 0 {
-        w = w.max(super::hat::W_FLOOR);
-    }
-    w
 }
 
 /// Whether this CPU runs the kernel.
@@ -204,7 +179,6 @@ mod avx2 {
             let v: [f32; 8] = std::array::from_fn(|l| f((8 * q + l) % 3));
             _mm256_setr_ps(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])
         };
-        let chan: [__m256i; 3] = std::array::from_fn(|q| lane(q, &|c| (c * 256) as i32));
         let start: [__m256i; 3] = std::array::from_fn(|q| lane(q, &|c| k.start[c]));
         let off: [__m256; 3] = std::array::from_fn(|q| lane_f(q, &|c| k.off[c]));
         let last: [__m256; 3] = std::array::from_fn(|q| lane_f(q, &|c| k.last[c]));
@@ -212,18 +186,18 @@ mod avx2 {
         let fade_lo = _mm256_setr_ps(fd[0], fd[1], fd[2], fd[3], fd[4], fd[5], fd[6], fd[7]);
         let fade_hi = _mm256_setr_ps(fd[8], fd[9], fd[10], fd[11], fd[12], fd[13], fd[14], fd[15]);
         let black = _mm256_set1_epi32(k.black);
+        let select = _mm256_set1_epi32(k.select);
         let zero = _mm256_setzero_ps();
         let bins = _mm256_set1_ps(super::super::refine::BINS_PER_STOP);
         // The last row's first entry: every row index is clamped to `0 ..= max_base` (a clamped
         // bin is in range by construction; the clamp keeps every read in bounds whatever it holds).
         let max_base = _mm256_set1_epi32((k.rows.len() - 3 - P) as i32);
         let stride = _mm256_set1_epi32(P as i32);
-        let votes = k.votes.as_ptr();
         let wrows = k.rows.as_ptr();
-        // Blocks of up to BLOCK vectors, each in two stages: the hat's estimate and weight row
-        // of every vector, then every vector's refinement. A vector's work is one long chain
-        // (gathers, a division, the bin, gathers that need it, a division, `2^x`); in stages,
-        // the independent vectors of a block overlap.
+        // Blocks of up to BLOCK vectors, each in two stages: the first estimate and weight row
+        // of every vector, then every vector's weighted mean. A vector's work is one long chain
+        // (gathers, the bin, gathers that need it, a division, `2^x`); in stages, the
+        // independent vectors of a block overlap.
         const BLOCK: usize = 12;
         let mut e0s = [zero; BLOCK];
         let mut bases = [_mm256_setzero_si256(); BLOCK];
@@ -242,34 +216,20 @@ mod avx2 {
                 let s = s0 + 8 * v;
                 let q = (s / 8) % 3;
                 let vote = &mut vs[v];
-                let (mut num, mut den, mut gn, mut gd) = (zero, zero, zero, zero);
+                // The first estimate: the longest frame's vote whose code is below `select`,
+                // else the shortest frame's (`first_estimate` of refine.rs).
+                let mut e0 = zero;
                 for (j, vj) in vote.iter_mut().enumerate() {
                     let z = code_at(j, s);
-                    // SAFETY: frame j's votes are `3 · 256` values from `votes + 768 j`, and
-                    // the index is a channel's 256 codes (`chan` ≤ 512) plus a code (≤ 255).
-                    *vj = unsafe {
-                        _mm256_i32gather_ps::<4>(votes.add(j * 768), _mm256_add_epi32(z, chan[q]))
-                    };
-                    let w = hat_weight::<P>(j, z);
-                    let wv = _mm256_mul_ps(w, *vj);
-                    // The hat's sums, three frames to a group as the scalar path adds them.
-                    if j % 3 == 0 {
-                        (gd, gn) = (w, wv);
+                    *vj = lookup(&k.votes[j * 768..j * 768 + 768], &codes[j][s..s + 8], q);
+                    e0 = if j == 0 {
+                        *vj
                     } else {
-                        gd = _mm256_add_ps(gd, w);
-                        gn = _mm256_add_ps(gn, wv);
-                    }
-                    if j % 3 == 2 || j + 1 == P {
-                        if j < 3 {
-                            (num, den) = (gn, gd);
-                        } else {
-                            num = _mm256_add_ps(num, gn);
-                            den = _mm256_add_ps(den, gd);
-                        }
-                    }
+                        let below = _mm256_cmpgt_epi32(select, z);
+                        _mm256_blendv_ps(e0, *vj, _mm256_castsi256_ps(below))
+                    };
                 }
-                // The hat's log2 E₀ and its weight row (`floor_bin` of refine.rs).
-                let e0 = _mm256_div_ps(num, den);
+                // Its weight row (`floor_bin` of refine.rs).
                 let x = _mm256_sub_ps(_mm256_mul_ps(e0, bins), off[q]);
                 let x = _mm256_min_ps(_mm256_max_ps(x, zero), last[q]);
                 let bias = _mm256_set1_ps(8_388_608.0);
@@ -285,51 +245,31 @@ mod avx2 {
             }
             for v in 0..count {
                 let s = s0 + 8 * v;
-                // Every frame's weight for the 8 samples: up to four frames by one 16-byte load a
-                // sample and a transpose, more by gathers.
+                // Every frame's weight for the 8 samples: four frames at a time by one 16-byte
+                // load a sample and a transpose (a gather is slower on some CPUs).
                 let mut wrow = [zero; P];
-                if P <= 4 {
-                    let mut b = [0i32; 8];
-                    // SAFETY: `b` is 8 writable `i32`s.
-                    unsafe { _mm256_storeu_si256(b.as_mut_ptr().cast(), bases[v]) };
-                    // SAFETY: 0 ≤ base ≤ (rows.len() − 3) − P (clamped above) with P ≥ 1, and
-                    // `rows` has 3 values of padding, so the 4 values from a base are in it.
-                    let ld = |i: usize| unsafe { _mm_loadu_ps(wrows.add(b[i] as usize)) };
+                let mut b = [0i32; 8];
+                // SAFETY: `b` is 8 writable `i32`s.
+                unsafe { _mm256_storeu_si256(b.as_mut_ptr().cast(), bases[v]) };
+                for (g, cols) in wrow.chunks_mut(4).enumerate() {
+                    // SAFETY: 0 ≤ base ≤ (rows.len() − 3) − P (clamped above), and the values
+                    // read are `base + 4 g ..= base + 4 g + 3 ≤ base + P + 2` (as `4 g < P`).
+                    let ld = |i: usize| unsafe { _mm_loadu_ps(wrows.add(b[i] as usize + 4 * g)) };
                     let r0 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(0)), ld(4));
                     let r1 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(1)), ld(5));
                     let r2 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(2)), ld(6));
                     let r3 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(3)), ld(7));
                     let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
                     let (t2, t3) = (_mm256_unpacklo_ps(r2, r3), _mm256_unpackhi_ps(r2, r3));
-                    let cols = [
-                        _mm256_castpd_ps(_mm256_unpacklo_pd(
-                            _mm256_castps_pd(t0),
-                            _mm256_castps_pd(t2),
-                        )),
-                        _mm256_castpd_ps(_mm256_unpackhi_pd(
-                            _mm256_castps_pd(t0),
-                            _mm256_castps_pd(t2),
-                        )),
-                        _mm256_castpd_ps(_mm256_unpacklo_pd(
-                            _mm256_castps_pd(t1),
-                            _mm256_castps_pd(t3),
-                        )),
-                        _mm256_castpd_ps(_mm256_unpackhi_pd(
-                            _mm256_castps_pd(t1),
-                            _mm256_castps_pd(t3),
-                        )),
+                    let pd = _mm256_castps_pd;
+                    let all = [
+                        _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t0), pd(t2))),
+                        _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t0), pd(t2))),
+                        _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t1), pd(t3))),
+                        _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t1), pd(t3))),
                     ];
-                    wrow.copy_from_slice(&cols[..P]);
-                } else {
-                    for (j, w) in wrow.iter_mut().enumerate() {
-                        // SAFETY: 0 ≤ base ≤ rows.len() − 3 − P (clamped above) and j < P.
-                        *w = unsafe {
-                            _mm256_i32gather_ps::<4>(
-                                wrows,
-                                _mm256_add_epi32(bases[v], _mm256_set1_epi32(j as i32)),
-                            )
-                        };
-                    }
+                    let m = cols.len();
+                    cols.copy_from_slice(&all[..m]);
                 }
                 let (mut n2, mut d2) = (zero, zero);
                 for j in 0..P {
@@ -367,27 +307,17 @@ mod avx2 {
         n
     }
 
-    /// `super::hat_weight` for eight codes.
+    /// The votes `table[256 c + z]` of eight codes `z` of one frame, the codes of the `q`-th
+    /// vector of a step (lane `l`'s channel `c = (8 q + l) mod 3`), by scalar loads: on some
+    /// CPUs (AMD Zen) a gather costs more than eight loads and inserts.
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn hat_weight<const P: usize>(j: usize, z: __m256i) -> __m256 {
-        let full = _mm256_set1_ps(super::super::hat::W_MAX);
-        let mut w = _mm256_cvtepi32_ps(_mm256_min_epi32(
-            z,
-            _mm256_sub_epi32(_mm256_set1_epi32(255), z),
-        ));
-        if j == 0 {
-            let high = _mm256_cmpgt_epi32(z, _mm256_set1_epi32(127));
-            w = _mm256_blendv_ps(w, full, _mm256_castsi256_ps(high));
-        }
-        if j + 1 == P {
-            let low = _mm256_cmpgt_epi32(_mm256_set1_epi32(128), z);
-            w = _mm256_blendv_ps(w, full, _mm256_castsi256_ps(low));
-        }
-        if j == 0 {
-            w = _mm256_max_ps(w, _mm256_set1_ps(super::super::hat::W_FLOOR));
-        }
-        w
+    fn lookup(table: &[f32], z: &[u8], q: usize) -> __m256 {
+        let (Ok(table), Ok(z)) = (<&[f32; 768]>::try_from(table), <&[u8; 8]>::try_from(z)) else {
+            unreachable!("a frame's votes and eight codes")
+        };
+        let at = |l: usize| table[((8 * q + l) % 3) * 256 + z[l] as usize];
+        _mm256_setr_ps(at(0), at(1), at(2), at(3), at(4), at(5), at(6), at(7))
     }
 
     /// [`crate::fastmath::exp2`] for eight values: the same operations in the same order.
@@ -480,12 +410,7 @@ pub(super) mod tests {
                 let lt: Vec<f64> = fs.iter().map(|f| f.exposure.relative().ln()).collect();
                 let g = |c: usize, v: usize| r.curve(c)[v];
                 let refine = super::Refine::<256>::new(&lt, &r, &model, black, g);
-                let hat = super::super::hat::Tables::<256>::new(
-                    &lt,
-                    |j, _c, z| super::super::hat::weight(z, j, p, Weighting::Hat),
-                    g,
-                );
-                let fused = super::Fused::new(&refine, |j, c, z| hat.entry(j, c, z), black);
+                let fused = super::Fused::new(&refine, black);
                 assert_eq!(
                     fused.is_some(),
                     p <= super::MAX_FRAMES,
