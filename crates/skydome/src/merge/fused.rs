@@ -1,14 +1,17 @@
-//! The noise-aware merge of 8-bit frames in one vector sweep: the first estimate, the weight
-//! row and the weighted mean of [`Refine`] for eight samples at a time, with AVX2 gathers for
-//! the table look-ups, chosen at run time (`is_x86_feature_detected!`). It gives the same bits
-//! as the scalar path ([`refine_row`](super::refine)): the same `f32` operations in the same
-//! order on every sample, no fused multiply-add.
+//! The noise-aware merge of 8-bit frames in one vector sweep: the hat's estimate and its
+//! refinement ([`Refine`]) for eight samples at a time, with AVX2, chosen at run time (`is_x86_feature_detected!`). It gives the same bits as the
+//! scalar path ([`merge_band`](super::hat)'s hat pass, then [`refine_row`](super::refine)):
+//! the same `f32` operations in the same order on every sample, no fused multiply-add.
 //!
-//! Per eight samples: one gather per frame for its votes, the first estimate by selects over
-//! the codes already in registers, one weight row per sample (one 16-byte load each and a
-//! transpose up to four frames, one gather per frame beyond), the observed-code factor by
-//! arithmetic on the code (a min, compares and a 16-entry in-register table), and nothing but
-//! the result goes back to memory.
+//! Why it pays: the scalar path looks every code up twice (the hat's table, then the vote
+//! table), writes the hat's estimate, its weight-row index and two sums per sample to memory
+//! and reads them back. Here each frame's `[vote, factor]` entry is read once and serves both
+//! passes; the hat's weight comes from the code by arithmetic (a min and compares). The look-ups
+//! are plain loads, not gathers: per eight samples and frame, eight 8-byte loads of the entries,
+//! two to a 16-byte half, split into a vector of votes and one of factors by two shuffles; the
+//! weight rows four frames at a time by one 16-byte load a sample and a transpose. On AMD Zen an
+//! 8-lane gather costs more than its eight loads: at 9 frames the kernel with gathers took 2.5×
+//! the hat merge's CPU time, with loads 1.7× (6 MP; see docs/performance.md).
 //!
 //! The arithmetic stands in for table entries, so [`Fused::new`] checks it against the scalar
 //! path's tables for every frame, channel and code and declines (the scalar path runs) on any
@@ -27,15 +30,8 @@ pub(super) const STEP: usize = 24;
 /// The vector kernel's tables for one merge of `frames` 8-bit frames (see the module docs).
 pub(super) struct Fused {
     frames: usize,
-    /// Frame-major, then channel, then code: frame `j`'s vote `log2 E_j` (as in [`Refine`]).
-    votes: Vec<f32>,
-    /// The observed-code factor of code `255 − k`, for `k = 0 ..= 15` (`k` clamped to 15 below
-    /// code 240): what the factor table holds above the black level.
-    fade: [f32; 16],
-    /// Codes at or below it get no weight.
-    black: i32,
-    /// [`Refine::select`]: the first estimate is the longest frame's vote with a code below it.
-    select: i32,
+    /// [`Refine`]'s `[vote, factor]` entries: frame-major, then channel, then code.
+    votes: Vec<[f32; 2]>,
     /// [`Refine`]'s weight rows, `frames` values a row.
     rows: Vec<f32>,
     /// Per channel: [`Refine`]'s bin offset, last bin and first row.
@@ -45,37 +41,37 @@ pub(super) struct Fused {
 }
 
 impl Fused {
-    /// The kernel's tables for the noise-aware merge `r` of 8-bit frames, or `None` when the
-    /// CPU has no AVX2, the input is not 8-bit, the frame count is beyond [`MAX_FRAMES`], or
-    /// the kernel's arithmetic would give any factor other than the tables' (see the module
-    /// docs).
-    pub(super) fn new<const N: usize>(r: &Refine<N>, black: u8) -> Option<Self> {
+    /// The kernel's tables for the refinement `r` of 8-bit frames whose hat pass uses `hat`
+    /// (per frame, channel and code `[w, w · log2 E_j]`), or `None` when the CPU has no AVX2,
+    /// the input is not 8-bit, the frame count is beyond [`MAX_FRAMES`], or the kernel's
+    /// arithmetic would give any weight other than the tables' (see the module docs).
+    pub(super) fn new<const N: usize>(
+        r: &Refine<N>,
+        hat: impl Fn(usize, usize, usize) -> [f32; 2],
+    ) -> Option<Self> {
         if N != 256 || !(1..=MAX_FRAMES).contains(&r.frames) || !available() {
             return None;
         }
         let p = r.frames;
         let entry = |j: usize, c: usize, z: usize| r.votes[(j * 3 + c) * N + z];
-        let mut fade = [0f32; 16];
-        for (k, f) in fade.iter_mut().enumerate() {
-            *f = entry(0, 0, 255 - k)[1];
-        }
         let fused = Self {
             frames: p,
-            votes: (0..p * 3 * N).map(|i| r.votes[i][0]).collect(),
-            fade,
-            black: black as i32,
-            select: r.select as i32,
+            votes: r.votes.clone(),
             // Padded for the kernel's 16-byte loads of a row (see `avx2::run`).
             rows: r.rows.iter().copied().chain([0.0; 3]).collect(),
             off: r.off,
             last: r.last,
             start: r.start,
         };
-        // Every factor the kernel computes must be the table's, bit for bit.
+        // Every weight the kernel computes must be the table's, bit for bit.
         for j in 0..p {
             for c in 0..3 {
                 for z in 0..N {
-                    if fused.factor(z as u8).to_bits() != entry(j, c, z)[1].to_bits() {
+                    let [vote, _] = entry(j, c, z);
+                    let w = hat_weight(j, p, z as u8);
+                    let want = hat(j, c, z);
+                    if w.to_bits() != want[0].to_bits() || (w * vote).to_bits() != want[1].to_bits()
+                    {
                         return None;
                     }
                 }
@@ -88,16 +84,7 @@ impl Fused {
                 return None;
             }
         }
-        Some(fused)
-    }
-
-    /// The observed-code factor as the kernel computes it.
-    fn factor(&self, z: u8) -> f32 {
-        if z as i32 > self.black {
-            self.fade[(255 - z as usize).min(15)]
-        } else {
-            0.0
-        }
+        (fused.votes.len() == p * 3 * 256).then_some(fused)
     }
 
     /// Merges the first whole [`STEP`]s of one row: `rows` holds the row of every frame (8-bit
@@ -118,6 +105,22 @@ impl Fused {
             0
         }
     }
+}
+
+/// The hat weight of code `z` in frame `j` of `p` as the kernel computes it: the same as
+/// [`weight`](super::hat::weight) for 8-bit codes under the hat (checked by [`Fused::new`]).
+fn hat_weight(j: usize, p: usize, z: u8) -> f32 {
+    let mut w = z.min(255 - z) as f32;
+    if j == 0 && z >= 128 {
+        w = super::hat::W_MAX;
+    }
+    if j + 1 == p && z <= 127 {
+        w = super::hat::W_MAX;
+    }
+    if j == 0 {
+        w = w.max(super::hat::W_FLOOR);
+    }
+    w
 }
 
 /// Whether this CPU runs the kernel.
@@ -182,11 +185,6 @@ mod avx2 {
         let start: [__m256i; 3] = std::array::from_fn(|q| lane(q, &|c| k.start[c]));
         let off: [__m256; 3] = std::array::from_fn(|q| lane_f(q, &|c| k.off[c]));
         let last: [__m256; 3] = std::array::from_fn(|q| lane_f(q, &|c| k.last[c]));
-        let fd = &k.fade;
-        let fade_lo = _mm256_setr_ps(fd[0], fd[1], fd[2], fd[3], fd[4], fd[5], fd[6], fd[7]);
-        let fade_hi = _mm256_setr_ps(fd[8], fd[9], fd[10], fd[11], fd[12], fd[13], fd[14], fd[15]);
-        let black = _mm256_set1_epi32(k.black);
-        let select = _mm256_set1_epi32(k.select);
         let zero = _mm256_setzero_ps();
         let bins = _mm256_set1_ps(super::super::refine::BINS_PER_STOP);
         // The last row's first entry: every row index is clamped to `0 ..= max_base` (a clamped
@@ -194,14 +192,15 @@ mod avx2 {
         let max_base = _mm256_set1_epi32((k.rows.len() - 3 - P) as i32);
         let stride = _mm256_set1_epi32(P as i32);
         let wrows = k.rows.as_ptr();
-        // Blocks of up to BLOCK vectors, each in two stages: the first estimate and weight row
-        // of every vector, then every vector's weighted mean. A vector's work is one long chain
-        // (gathers, the bin, gathers that need it, a division, `2^x`); in stages, the
-        // independent vectors of a block overlap.
+        // Blocks of up to BLOCK vectors, each in two stages: the hat's estimate and weight row
+        // of every vector, then every vector's refinement. A vector's work is one long chain
+        // (gathers, a division, the bin, gathers that need it, a division, `2^x`); in stages,
+        // the independent vectors of a block overlap.
         const BLOCK: usize = 12;
         let mut e0s = [zero; BLOCK];
         let mut bases = [_mm256_setzero_si256(); BLOCK];
         let mut vs = [[zero; P]; BLOCK];
+        let mut fs = [[zero; P]; BLOCK];
         let code_at = |j: usize, s: usize| {
             let b: [u8; 8] = match codes[j][s..s + 8].try_into() {
                 Ok(b) => b,
@@ -215,21 +214,31 @@ mod avx2 {
             for v in 0..count {
                 let s = s0 + 8 * v;
                 let q = (s / 8) % 3;
-                let vote = &mut vs[v];
-                // The first estimate: the longest frame's vote whose code is below `select`,
-                // else the shortest frame's (`first_estimate` of refine.rs).
-                let mut e0 = zero;
-                for (j, vj) in vote.iter_mut().enumerate() {
+                let (mut num, mut den, mut gn, mut gd) = (zero, zero, zero, zero);
+                for j in 0..P {
                     let z = code_at(j, s);
-                    *vj = lookup(&k.votes[j * 768..j * 768 + 768], &codes[j][s..s + 8], q);
-                    e0 = if j == 0 {
-                        *vj
+                    let (vj, fj) = lookup(&k.votes[j * 768..j * 768 + 768], &codes[j][s..s + 8], q);
+                    (vs[v][j], fs[v][j]) = (vj, fj);
+                    let w = hat_weight::<P>(j, z);
+                    let wv = _mm256_mul_ps(w, vj);
+                    // The hat's sums, three frames to a group as the scalar path adds them.
+                    if j % 3 == 0 {
+                        (gd, gn) = (w, wv);
                     } else {
-                        let below = _mm256_cmpgt_epi32(select, z);
-                        _mm256_blendv_ps(e0, *vj, _mm256_castsi256_ps(below))
-                    };
+                        gd = _mm256_add_ps(gd, w);
+                        gn = _mm256_add_ps(gn, wv);
+                    }
+                    if j % 3 == 2 || j + 1 == P {
+                        if j < 3 {
+                            (num, den) = (gn, gd);
+                        } else {
+                            num = _mm256_add_ps(num, gn);
+                            den = _mm256_add_ps(den, gd);
+                        }
+                    }
                 }
-                // Its weight row (`floor_bin` of refine.rs).
+                // The hat's log2 E₀ and its weight row (`floor_bin` of refine.rs).
+                let e0 = _mm256_div_ps(num, den);
                 let x = _mm256_sub_ps(_mm256_mul_ps(e0, bins), off[q]);
                 let x = _mm256_min_ps(_mm256_max_ps(x, zero), last[q]);
                 let bias = _mm256_set1_ps(8_388_608.0);
@@ -246,7 +255,7 @@ mod avx2 {
             for v in 0..count {
                 let s = s0 + 8 * v;
                 // Every frame's weight for the 8 samples: four frames at a time by one 16-byte
-                // load a sample and a transpose (a gather is slower on some CPUs).
+                // load a sample and a transpose.
                 let mut wrow = [zero; P];
                 let mut b = [0i32; 8];
                 // SAFETY: `b` is 8 writable `i32`s.
@@ -273,19 +282,7 @@ mod avx2 {
                 }
                 let (mut n2, mut d2) = (zero, zero);
                 for j in 0..P {
-                    let z = code_at(j, s);
-                    let kk = _mm256_min_epi32(
-                        _mm256_sub_epi32(_mm256_set1_epi32(255), z),
-                        _mm256_set1_epi32(15),
-                    );
-                    let lo = _mm256_permutevar8x32_ps(fade_lo, kk);
-                    let hi = _mm256_permutevar8x32_ps(fade_hi, kk);
-                    let f = _mm256_blendv_ps(
-                        lo,
-                        hi,
-                        _mm256_castsi256_ps(_mm256_cmpgt_epi32(kk, _mm256_set1_epi32(7))),
-                    );
-                    let f = _mm256_and_ps(f, _mm256_castsi256_ps(_mm256_cmpgt_epi32(z, black)));
+                    let f = fs[v][j];
                     let wt = _mm256_mul_ps(f, wrow[j]);
                     n2 = _mm256_add_ps(n2, _mm256_mul_ps(wt, vs[v][j]));
                     d2 = _mm256_add_ps(d2, wt);
@@ -307,17 +304,59 @@ mod avx2 {
         n
     }
 
-    /// The votes `table[256 c + z]` of eight codes `z` of one frame, the codes of the `q`-th
-    /// vector of a step (lane `l`'s channel `c = (8 q + l) mod 3`), by scalar loads: on some
-    /// CPUs (AMD Zen) a gather costs more than eight loads and inserts.
+    /// The votes and factors `table[256 c + z]` of eight codes `z` of one frame, the codes of
+    /// the `q`-th vector of a step (lane `l`'s channel `c = (8 q + l) mod 3`): each entry by one
+    /// 8-byte load, two to a 16-byte half, split by two shuffles.
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn lookup(table: &[f32], z: &[u8], q: usize) -> __m256 {
-        let (Ok(table), Ok(z)) = (<&[f32; 768]>::try_from(table), <&[u8; 8]>::try_from(z)) else {
-            unreachable!("a frame's votes and eight codes")
+    fn lookup(table: &[[f32; 2]], z: &[u8], q: usize) -> (__m256, __m256) {
+        let (Ok(table), Ok(z)) = (<&[[f32; 2]; 768]>::try_from(table), <&[u8; 8]>::try_from(z))
+        else {
+            unreachable!("a frame's entries and eight codes")
         };
-        let at = |l: usize| table[((8 * q + l) % 3) * 256 + z[l] as usize];
-        _mm256_setr_ps(at(0), at(1), at(2), at(3), at(4), at(5), at(6), at(7))
+        let at = |l: usize| {
+            table[((8 * q + l) % 3) * 256 + z[l] as usize]
+                .as_ptr()
+                .cast::<f64>()
+        };
+        // SAFETY: each pointer is to an entry of two `f32`s, eight readable bytes (`movsd` and
+        // `movhpd` need no alignment).
+        let pair = |l: usize| unsafe { _mm_loadh_pd(_mm_load_sd(at(l)), at(l + 1)) };
+        let half = |l: usize, h: usize| {
+            _mm256_castpd_ps(_mm256_insertf128_pd::<1>(
+                _mm256_castpd128_pd256(pair(l)),
+                pair(h),
+            ))
+        };
+        // a = [v0 f0 v1 f1 | v4 f4 v5 f5], b = [v2 f2 v3 f3 | v6 f6 v7 f7].
+        let (a, b) = (half(0, 4), half(2, 6));
+        (
+            _mm256_shuffle_ps::<0b10_00_10_00>(a, b),
+            _mm256_shuffle_ps::<0b11_01_11_01>(a, b),
+        )
+    }
+
+    /// `super::hat_weight` for eight codes.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn hat_weight<const P: usize>(j: usize, z: __m256i) -> __m256 {
+        let full = _mm256_set1_ps(super::super::hat::W_MAX);
+        let mut w = _mm256_cvtepi32_ps(_mm256_min_epi32(
+            z,
+            _mm256_sub_epi32(_mm256_set1_epi32(255), z),
+        ));
+        if j == 0 {
+            let high = _mm256_cmpgt_epi32(z, _mm256_set1_epi32(127));
+            w = _mm256_blendv_ps(w, full, _mm256_castsi256_ps(high));
+        }
+        if j + 1 == P {
+            let low = _mm256_cmpgt_epi32(_mm256_set1_epi32(128), z);
+            w = _mm256_blendv_ps(w, full, _mm256_castsi256_ps(low));
+        }
+        if j == 0 {
+            w = _mm256_max_ps(w, _mm256_set1_ps(super::super::hat::W_FLOOR));
+        }
+        w
     }
 
     /// [`crate::fastmath::exp2`] for eight values: the same operations in the same order.
@@ -410,7 +449,12 @@ pub(super) mod tests {
                 let lt: Vec<f64> = fs.iter().map(|f| f.exposure.relative().ln()).collect();
                 let g = |c: usize, v: usize| r.curve(c)[v];
                 let refine = super::Refine::<256>::new(&lt, &r, &model, black, g);
-                let fused = super::Fused::new(&refine, black);
+                let hat = super::super::hat::Tables::<256>::new(
+                    &lt,
+                    |j, _c, z| super::super::hat::weight(z, j, p, Weighting::Hat),
+                    g,
+                );
+                let fused = super::Fused::new(&refine, |j, c, z| hat.entry(j, c, z));
                 assert_eq!(
                     fused.is_some(),
                     p <= super::MAX_FRAMES,

@@ -1,7 +1,7 @@
 //! The hat merge: per-frame look-up tables of `(w, w · log2 E_j)`, summed a few frames at a
 //! time over bands of rows, then the clipped-pixel flags and the confidence of each row.
 
-use super::refine::{refine_row, Refine};
+use super::refine::{refine_row, Refine, Scratch};
 use super::{code_tables, fast_exp2, Code, Frame, Weighting};
 use super::{BLACK, CLIPPED_HIGH, CLIPPED_LOW, RELEASE_BANDS, ROWS_PER_BAND};
 
@@ -61,9 +61,9 @@ impl<const N: usize> Tables<N> {
         Self { flat }
     }
 
-    /// No tables, for a merge that reads none (the noise-aware merge's).
-    pub(super) fn empty() -> Self {
-        Self { flat: Vec::new() }
+    /// Frame `j`'s entry `[w, w · log2 E_j]` for channel `c` and code `z`.
+    pub(super) fn entry(&self, j: usize, c: usize, z: usize) -> [f32; 2] {
+        self.flat[(j * 3 + c) * N + z]
     }
 
     /// The tables of frames `j0 .. j0 + G`, per channel.
@@ -83,8 +83,8 @@ type Band<'a> = (usize, &'a mut [f32], &'a mut [f32], &'a mut [u8]);
 
 /// Merges all bands (in parallel with the `parallel` feature); returns the clipped-high,
 /// clipped-low and black pixel counts. `conf` and `clip` are empty when not asked for; a code
-/// at or below `black` counts as black. With `refine` the rows are merged by the noise-aware
-/// merge instead of the hat (whose tables `luts` are then not read).
+/// at or below `black` counts as black. With `refine` (the noise-aware merge) each row of the
+/// hat's estimate is refined as soon as it is merged.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run_bands<T: Code, const N: usize>(
     srcs: &[&[T]],
@@ -309,46 +309,46 @@ fn merge_band<T: Code, const N: usize>(
 ) -> (usize, usize, usize) {
     const GROUP: usize = 3;
     let row = 3 * w;
-    let mut den = vec![
-        0f32;
-        if refine.is_none() && srcs.len() > GROUP {
-            row
-        } else {
-            0
-        }
-    ];
+    let mut den = vec![0f32; if srcs.len() > GROUP { row } else { 0 }];
     let mut hs = vec![0u32; if conf.is_empty() { 0 } else { row }];
     let mut ext = vec![0u8; row];
     let mut rows: Vec<&[T]> = Vec::with_capacity(srcs.len());
     let mut tails: Vec<&[T]> = Vec::with_capacity(srcs.len());
+    let mut scratch = Scratch::default();
     let (mut high, mut low, mut blk) = (0usize, 0usize, 0usize);
     for (r, orow) in out.chunks_mut(row).enumerate() {
         let start = off + r * row;
         rows.clear();
         rows.extend(srcs.iter().map(|s| &s[start..start + row]));
+        // The noise-aware merge's vector kernel takes what it can of the row (whole steps of
+        // eight pixels), the scalar passes below the rest, with the same bits.
+        let done = refine.map_or(0, |r| T::fused_row(&rows, r, orow));
+        tails.clear();
+        tails.extend(rows.iter().map(|s| &s[done..]));
+        let dn = done.min(den.len());
+        let (orest, drest) = (&mut orow[done..], &mut den[dn..]);
+        if tails.len() <= GROUP {
+            accumulate_group::<T, N, ONLY>(&tails, luts, 0, orest, &mut []);
+        } else {
+            for (k, fs) in tails.chunks(GROUP).enumerate() {
+                if k == 0 {
+                    accumulate_group::<T, N, FIRST>(fs, luts, 0, orest, drest);
+                } else {
+                    accumulate_group::<T, N, LATER>(fs, luts, k * GROUP, orest, drest);
+                }
+            }
+        }
         match refine {
-            // The noise-aware merge: its vector kernel takes what it can of the row (whole
-            // steps of eight pixels), the scalar pass the rest, with the same bits.
+            // The noise-aware merge refines the hat's `log2 E₀` while the row is in cache.
             Some(r) => {
-                let done = T::fused_row(&rows, r, orow);
-                tails.clear();
-                tails.extend(rows.iter().map(|s| &s[done..]));
-                refine_row(&tails, r, &mut orow[done..]);
-            }
-            None if rows.len() <= GROUP => {
-                accumulate_group::<T, N, ONLY>(&rows, luts, 0, orow, &mut []);
-                finish_row(orow, &[]);
-            }
-            None => {
-                for (k, fs) in rows.chunks(GROUP).enumerate() {
-                    if k == 0 {
-                        accumulate_group::<T, N, FIRST>(fs, luts, 0, orow, &mut den);
-                    } else {
-                        accumulate_group::<T, N, LATER>(fs, luts, k * GROUP, orow, &mut den);
+                if !drest.is_empty() {
+                    for (o, &d) in orest.iter_mut().zip(drest.iter()) {
+                        *o /= d;
                     }
                 }
-                finish_row(orow, &den);
+                refine_row(&tails, r, &mut scratch, orest);
             }
+            None => finish_row(orest, drest),
         }
 
         // Clipped pixels: some channel is black or full scale in every frame. Branch-free byte

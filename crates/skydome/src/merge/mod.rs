@@ -453,20 +453,22 @@ fn merge_codes<T: Code, const N: usize>(
     let frames = source.frames();
     let (w, h, p) = (frames[0].width, frames[0].height, frames.len());
     let check = opts.consistency || opts.ghosts;
+    // The noise-aware merge starts from the hat's estimate and refines it (see [`Refine`]).
+    let first_pass = match opts.weighting {
+        Weighting::Noise => Weighting::Hat,
+        other => other,
+    };
     let g = |c: usize, v: usize| T::g(response, c, v);
+    let luts = Tables::<N>::new(lt, |j, _c, z| weight(z, j, p, first_pass), g);
     let black = T::black(opts.black_level);
-    // The noise-aware merge has its own tables (see [`Refine`]); the others the hat's.
+    // The noise-aware merge refines each row right after the hat has merged it (one pass).
     let refine = match (opts.weighting, &noise_est) {
         (Weighting::Noise, Some(e)) => {
             let mut r = Refine::<N>::new(lt, response, &e.model, opts.black_level, g);
-            r.fused = fused::Fused::new(&r, opts.black_level);
+            r.fused = fused::Fused::new(&r, |j, c, z| luts.entry(j, c, z));
             Some(r)
         }
         _ => None,
-    };
-    let luts = match refine {
-        Some(_) => Tables::<N>::empty(),
-        None => Tables::<N>::new(lt, |j, _c, z| weight(z, j, p, opts.weighting), g),
     };
     let (data, conf, clip) = outputs(out, opts, w, h);
     // Without the consistency test, which reads every frame again, the rows can be given back

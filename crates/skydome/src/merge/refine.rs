@@ -10,38 +10,23 @@ use crate::response::{Response, LEVELS};
 /// Bins per stop of the hat's estimate `log2 E₀` in the weight rows of [`Refine`].
 pub(super) const BINS_PER_STOP: f32 = 32.0;
 
-/// A frame whose code is below this (8-bit scale) is well exposed enough for its vote to pick
-/// the weights of every frame: [`Refine`]'s first estimate is the vote of the longest such
-/// frame. It is below the top codes' fade ([`noise::TOP_FADE`]) and JPEG's ringing there, and
-/// far enough below [`LOWER_BOUND_CODE`] that no frame's weight is cut off near it.
-pub(super) const SELECT_BELOW: u8 = 224;
-
-/// The noise-aware merge ([`Weighting::Noise`](super::Weighting::Noise)).
+/// The second estimate of the noise-aware merge ([`Weighting::Noise`](super::Weighting::Noise)).
 ///
 /// A vote's variance is that of the code the frame *should* read for the pixel's light, not of
 /// the code it happened to read: weighting by the observed code lets each frame's own noise
 /// choose its weight (a vote that came out high also came out more trusted), which biases the
-/// mean and, measured against the truth, lost to the hat on the well-exposed sky. So a first
-/// estimate `log2 E₀` picks the weights; frame `j` is then expected at
+/// mean and, measured against the truth, lost to the hat on the well-exposed sky. So the hat
+/// merge gives a first estimate `log2 E₀`; frame `j` is then expected at
 /// `g(z*) = ln E₀ + ln Δt_j`, and its vote gets the weight `1 / σ²(z*)` of the noise model
 /// (Granados et al. 2010 use the same two-pass scheme), zero where `z*` is within
 /// [`LOWER_BOUND_CODE`] of clipping, times a factor of the observed code: zero at the black
-/// level and at full scale, fading over the top [`noise::TOP_FADE`] codes. The first estimate
-/// only has to pick a 1/32-stop bin, so it is one frame's vote, not a merge: that of the
-/// longest frame whose code is below [`SELECT_BELOW`] (the best-exposed frame that is surely
-/// not clipped), or the shortest frame's when every frame is above it. A pixel no frame can
-/// vote for keeps that vote: the shortest frame's lower bound for a clipped sun, the longest
-/// frame's upper bound for a pixel black in every frame, as the hat gives them.
-///
-/// The chosen frame's own noise now picks the bin, but only its own weight depends on it, and
-/// smoothly (the weight of a code below [`SELECT_BELOW`] changes by a few per cent over a bin);
-/// measured against the oracle of `tests/lib/oracle.rs` it merges as well as the hat's
-/// estimate did, at about half the cost.
+/// level and at full scale, fading over the top [`noise::TOP_FADE`] codes. A pixel no frame
+/// can vote for keeps the hat's value (clipped suns, pixels black in every frame).
 ///
 /// The weights are looked up, not computed: `log2 E₀` is binned at [`BINS_PER_STOP`] bins a
 /// stop, and each channel's table holds, per bin, one row of every frame's weight at that
 /// bin's expected code (`p` values side by side, one cache line for a few frames). A sample
-/// then costs one table entry per frame (vote and factor), one bin index and one row.
+/// then costs one bin index (vector arithmetic) and one row, whatever the frame count.
 pub(super) struct Refine<const N: usize> {
     /// Frame-major, then channel, then code: `[log2 E_j, observed-code factor]`.
     pub(super) votes: Vec<[f32; 2]>,
@@ -57,10 +42,8 @@ pub(super) struct Refine<const N: usize> {
     pub(super) last: [f32; 3],
     /// Per channel: its first row's index in `rows` (in rows).
     pub(super) start: [i32; 3],
-    /// [`SELECT_BELOW`] in this input's code units.
-    pub(super) select: u32,
-    /// The vector kernel that merges 8-bit rows with the same bits, where the CPU has one (see
-    /// [`Fused`]).
+    /// The vector kernel that merges 8-bit rows in one sweep with the same bits, where the CPU
+    /// has one (set by the merge once it has the hat's tables; see [`Fused`]).
     pub(super) fused: Option<Fused>,
 }
 
@@ -140,43 +123,100 @@ impl<const N: usize> Refine<N> {
             off,
             last,
             start,
-            select: (SELECT_BELOW as f64 / scale).ceil() as u32,
             fused: None,
         }
     }
 }
 
-/// Merges one row: `rows` holds that row of every frame, `out` (`3 · width` samples, starting
-/// at a pixel's red sample) receives the radiance.
+/// Samples per block of the vector passes: eight pixels, so each lane's channel is fixed.
+const LANES: usize = 24;
+
+/// Row buffers of [`refine_row`], allocated once per band of rows.
+#[derive(Default)]
+pub(super) struct Scratch {
+    /// Per sample: the index of its weight row in [`Refine::rows`], in rows.
+    at: Vec<u32>,
+    /// Per sample: `Σ w · log2 E_j`.
+    num: Vec<f32>,
+    /// Per sample: `Σ w`.
+    den: Vec<f32>,
+}
+
+/// Refines one row of the hat's estimate: `out` (`3 · width` samples, starting at a pixel's red
+/// sample) holds the hat's `log2 E₀` on entry and the radiance on return; `rows` holds that row
+/// of every frame. The merge calls it on each row right after the hat pass, while the row's
+/// codes are still in cache.
 ///
-/// One pass over the pixels, the frame loop unrolled for up to nine frames: each sample's votes
-/// and observed-code factors (one table entry per frame), its first estimate `log2 E₀` (the vote
-/// of the frame [`Refine`] picks, see [`SELECT_BELOW`]), its weight row, and the weighted mean
-/// in registers; then the final `2^x` (vector arithmetic).
-pub(super) fn refine_row<T: Code, const N: usize>(rows: &[&[T]], r: &Refine<N>, out: &mut [f32]) {
+/// Three passes over the row: each sample's weight row (vector arithmetic), the look-ups and
+/// sums (scalar, one pixel's three channels at a time with the sums in registers, the frame
+/// loop unrolled for up to nine frames), and the final `2^x` (vector arithmetic).
+pub(super) fn refine_row<T: Code, const N: usize>(
+    rows: &[&[T]],
+    r: &Refine<N>,
+    scratch: &mut Scratch,
+    out: &mut [f32],
+) {
+    let n = out.len();
     debug_assert_eq!(rows.len(), r.frames);
-    match rows.len() {
-        1 => sums::<T, N, 1>(rows, r, out),
-        2 => sums::<T, N, 2>(rows, r, out),
-        3 => sums::<T, N, 3>(rows, r, out),
-        4 => sums::<T, N, 4>(rows, r, out),
-        5 => sums::<T, N, 5>(rows, r, out),
-        6 => sums::<T, N, 6>(rows, r, out),
-        7 => sums::<T, N, 7>(rows, r, out),
-        8 => sums::<T, N, 8>(rows, r, out),
-        9 => sums::<T, N, 9>(rows, r, out),
-        _ => sums_any(rows, r, out),
+    scratch.at.resize(n, 0);
+    scratch.num.resize(n, 0.0);
+    scratch.den.resize(n, 0.0);
+    // 1. Each sample's weight row: its bin of `log2 E₀`, clamped, plus where its channel's
+    //    rows start.
+    let off: [f32; LANES] = std::array::from_fn(|s| r.off[s % 3]);
+    let last: [f32; LANES] = std::array::from_fn(|s| r.last[s % 3]);
+    let start: [i32; LANES] = std::array::from_fn(|s| r.start[s % 3]);
+    let at = &mut scratch.at[..n];
+    let (ab, atail) = at.as_chunks_mut::<LANES>();
+    let (ob, otail) = out.as_chunks::<LANES>();
+    for (a, o) in ab.iter_mut().zip(ob) {
+        for s in 0..LANES {
+            a[s] = (start[s] + floor_bin(o[s] * BINS_PER_STOP - off[s], last[s])) as u32;
+        }
     }
-    for o in out.iter_mut() {
-        *o = fast_exp2(*o);
+    let nb = ob.len() * LANES;
+    for (k, (a, o)) in atail.iter_mut().zip(otail).enumerate() {
+        let c = (nb + k) % 3;
+        *a = (r.start[c] + floor_bin(*o * BINS_PER_STOP - r.off[c], r.last[c])) as u32;
+    }
+    // 2. The weighted sums.
+    let (num, den) = (&mut scratch.num[..n], &mut scratch.den[..n]);
+    match rows.len() {
+        1 => sums::<T, N, 1>(rows, r, at, num, den),
+        2 => sums::<T, N, 2>(rows, r, at, num, den),
+        3 => sums::<T, N, 3>(rows, r, at, num, den),
+        4 => sums::<T, N, 4>(rows, r, at, num, den),
+        5 => sums::<T, N, 5>(rows, r, at, num, den),
+        6 => sums::<T, N, 6>(rows, r, at, num, den),
+        7 => sums::<T, N, 7>(rows, r, at, num, den),
+        8 => sums::<T, N, 8>(rows, r, at, num, den),
+        9 => sums::<T, N, 9>(rows, r, at, num, den),
+        _ => sums_any(rows, r, at, num, den),
+    }
+    // 3. The refined value where some frame could vote, else the hat's.
+    let (ob, ot) = out.as_chunks_mut::<LANES>();
+    let (nb, nt) = num.as_chunks::<LANES>();
+    let (db, dt) = den.as_chunks::<LANES>();
+    for ((o, nv), dv) in ob.iter_mut().zip(nb).zip(db) {
+        for s in 0..LANES {
+            o[s] = refined(o[s], nv[s], dv[s]);
+        }
+    }
+    for ((o, &nv), &dv) in ot.iter_mut().zip(nt).zip(dt) {
+        *o = refined(*o, nv, dv);
     }
 }
 
-/// The weighted means of [`refine_row`] for `P` frames, in `log2` units: per pixel, every
-/// frame's three votes, each weighted by its observed-code factor and its entry in the
-/// sample's weight row.
+/// The sums of [`refine_row`] for `P` frames: per pixel, every frame's three votes, each
+/// weighted by its observed-code factor and its entry in the sample's weight row.
 #[inline(always)]
-fn sums<T: Code, const N: usize, const P: usize>(rows: &[&[T]], r: &Refine<N>, out: &mut [f32]) {
+fn sums<T: Code, const N: usize, const P: usize>(
+    rows: &[&[T]],
+    r: &Refine<N>,
+    at: &[u32],
+    num: &mut [f32],
+    den: &mut [f32],
+) {
     let (tables, _) = r.votes.as_chunks::<N>();
     let (frames, _) = tables.as_chunks::<3>();
     let frames: &[[[[f32; 2]; N]; 3]; P] = match frames[..P].try_into() {
@@ -184,72 +224,59 @@ fn sums<T: Code, const N: usize, const P: usize>(rows: &[&[T]], r: &Refine<N>, o
         Err(_) => unreachable!("P frames"),
     };
     // Whole pixels, every slice cut to the same length so the loop needs no bounds checks.
-    let m = out.len() / 3;
+    let m = num.len() / 3;
     let srcs: [&[[T; 3]]; P] = std::array::from_fn(|j| &rows[j].as_chunks::<3>().0[..m]);
-    let out = &mut out.as_chunks_mut::<3>().0[..m];
+    let at = &at.as_chunks::<3>().0[..m];
+    let num = &mut num.as_chunks_mut::<3>().0[..m];
+    let den = &mut den.as_chunks_mut::<3>().0[..m];
     let (wrows, _) = r.rows.as_chunks::<P>();
     let none = [0f32; P];
-    for (k, o) in out.iter_mut().enumerate() {
-        for c in 0..3 {
-            let z: [usize; P] = std::array::from_fn(|j| srcs[j][k][c].index());
-            let e: [[f32; 2]; P] = std::array::from_fn(|j| frames[j][c][z[j]]);
-            let l0 = first_estimate(&z, &e, r.select);
-            // A row index is in range by construction; a missing row would weigh nothing.
-            let at = r.start[c] + floor_bin(l0 * BINS_PER_STOP - r.off[c], r.last[c]);
-            let w = wrows.get(at as usize).unwrap_or(&none);
-            let (mut nv, mut dv) = (0f32, 0f32);
-            for j in 0..P {
-                let [vote, f] = e[j];
-                let wt = f * w[j];
-                nv += wt * vote;
-                dv += wt;
+    for k in 0..m {
+        // A row index is in range by construction; a missing row would weigh nothing.
+        let w: [&[f32; P]; 3] =
+            std::array::from_fn(|c| wrows.get(at[k][c] as usize).unwrap_or(&none));
+        let (mut nv, mut dv) = ([0f32; 3], [0f32; 3]);
+        for j in 0..P {
+            let z = srcs[j][k];
+            for c in 0..3 {
+                let [vote, f] = frames[j][c][z[c].index()];
+                let wt = f * w[c][j];
+                nv[c] += wt * vote;
+                dv[c] += wt;
             }
-            o[c] = refined(l0, nv, dv);
         }
+        num[k] = nv;
+        den[k] = dv;
     }
 }
 
 /// [`sums`] for any number of frames.
-fn sums_any<T: Code, const N: usize>(rows: &[&[T]], r: &Refine<N>, out: &mut [f32]) {
+fn sums_any<T: Code, const N: usize>(
+    rows: &[&[T]],
+    r: &Refine<N>,
+    at: &[u32],
+    num: &mut [f32],
+    den: &mut [f32],
+) {
     let p = rows.len();
     let (tables, _) = r.votes.as_chunks::<N>();
     let (frames, _) = tables.as_chunks::<3>();
-    let mut z = vec![0usize; p];
-    let mut e = vec![[0f32; 2]; p];
-    for (i, o) in out.iter_mut().enumerate() {
+    for (i, (nv, dv)) in num.iter_mut().zip(den.iter_mut()).enumerate() {
         let c = i % 3;
-        for (j, (src, tab)) in rows.iter().zip(frames).enumerate() {
-            z[j] = src[i].index();
-            e[j] = tab[c][z[j]];
-        }
-        let l0 = first_estimate(&z, &e, r.select);
-        let a = (r.start[c] + floor_bin(l0 * BINS_PER_STOP - r.off[c], r.last[c])) as usize * p;
+        let a = at[i] as usize * p;
         let Some(w) = r.rows.get(a..a + p) else {
-            *o = l0;
+            (*nv, *dv) = (0.0, 0.0);
             continue;
         };
         let (mut sn, mut sd) = (0f32, 0f32);
-        for (&[vote, f], &wj) in e.iter().zip(w) {
+        for ((src, tab), &wj) in rows.iter().zip(frames).zip(w) {
+            let [vote, f] = tab[c][src[i].index()];
             let wt = f * wj;
             sn += wt * vote;
             sd += wt;
         }
-        *o = refined(l0, sn, sd);
+        (*nv, *dv) = (sn, sd);
     }
-}
-
-/// The first estimate `log2 E₀` of one sample from its frames' codes `z` and table entries `e`
-/// (shortest frame first): the vote of the longest frame whose code is below `select`, or the
-/// shortest frame's when none is (see [`Refine`]).
-#[inline(always)]
-fn first_estimate(z: &[usize], e: &[[f32; 2]], select: u32) -> f32 {
-    let mut l0 = e[0][0];
-    for (&zj, ej) in z.iter().zip(e) {
-        if (zj as u32) < select {
-            l0 = ej[0];
-        }
-    }
-    l0
 }
 
 /// `⌊x⌋` of `x` clamped to `0 ..= top` (`top` a whole number below 2²²; NaN gives 0), by
@@ -266,15 +293,11 @@ fn floor_bin(x: f32, top: f32) -> i32 {
     rounded - ((t - BIAS) > x) as i32
 }
 
-/// The merged value in `log2` units: `num / den` where some frame could vote (`den > 0`) and
-/// the first estimate `log2 E₀` is a number, else `log2 E₀`. (The caller's [`fast_exp2`]
-/// clamps its argument, so its value is positive and finite exactly when that is not NaN.)
+/// The refined value `2^(num / den)` where some frame could vote (`den > 0`) and the hat's
+/// `log2 E₀` is a number, else the hat's `2^log2 E₀`. One `2^x` either way: [`fast_exp2`]
+/// clamps its argument, so its value is positive and finite exactly when that is not NaN.
 #[inline(always)]
 fn refined(l0: f32, num: f32, den: f32) -> f32 {
     let x = num / den;
-    if (den > 0.0) & !l0.is_nan() {
-        x
-    } else {
-        l0
-    }
+    fast_exp2(if (den > 0.0) & !l0.is_nan() { x } else { l0 })
 }
