@@ -1,16 +1,17 @@
 //! The noise-aware merge of 8-bit frames in one vector sweep: the hat's estimate and its
-//! refinement ([`Refine`]) for eight samples at a time, with AVX2 gathers for the table
-//! look-ups, chosen at run time (`is_x86_feature_detected!`). It gives the same bits as the
+//! refinement ([`Refine`]) for eight samples at a time, with AVX2, chosen at run time (`is_x86_feature_detected!`). It gives the same bits as the
 //! scalar path ([`merge_band`](super::hat)'s hat pass, then [`refine_row`](super::refine)):
 //! the same `f32` operations in the same order on every sample, no fused multiply-add.
 //!
 //! Why it pays: the scalar path looks every code up twice (the hat's table, then the vote
 //! table), writes the hat's estimate, its weight-row index and two sums per sample to memory
-//! and reads them back, and its look-ups are scalar loads that the compiler moves into vector
-//! lanes one by one. Here each frame's vote is gathered once and serves both passes; the hat's
-//! weight and the observed-code factor come from the code by arithmetic (a min, compares, and a
-//! 16-entry in-register table), so a sample costs one gather per frame for its vote and one per
-//! frame for its weight row; nothing but the result goes back to memory.
+//! and reads them back. Here each frame's `[vote, factor]` entry is read once and serves both
+//! passes; the hat's weight comes from the code by arithmetic (a min and compares). The look-ups
+//! are plain loads, not gathers: per eight samples and frame, eight 8-byte loads of the entries,
+//! two to a 16-byte half, split into a vector of votes and one of factors by two shuffles; the
+//! weight rows four frames at a time by one 16-byte load a sample and a transpose. On AMD Zen an
+//! 8-lane gather costs more than its eight loads: at 9 frames the kernel with gathers took 2.5×
+//! the hat merge's CPU time, with loads 1.7× (6 MP; see docs/performance.md).
 //!
 //! The arithmetic stands in for table entries, so [`Fused::new`] checks it against the scalar
 //! path's tables for every frame, channel and code and declines (the scalar path runs) on any
@@ -29,13 +30,8 @@ pub(super) const STEP: usize = 24;
 /// The vector kernel's tables for one merge of `frames` 8-bit frames (see the module docs).
 pub(super) struct Fused {
     frames: usize,
-    /// Frame-major, then channel, then code: frame `j`'s vote `log2 E_j` (as in [`Refine`]).
-    votes: Vec<f32>,
-    /// The observed-code factor of code `255 − k`, for `k = 0 ..= 15` (`k` clamped to 15 below
-    /// code 240): what the factor table holds above the black level.
-    fade: [f32; 16],
-    /// Codes at or below it get no weight.
-    black: i32,
+    /// [`Refine`]'s `[vote, factor]` entries: frame-major, then channel, then code.
+    votes: Vec<[f32; 2]>,
     /// [`Refine`]'s weight rows, `frames` values a row.
     rows: Vec<f32>,
     /// Per channel: [`Refine`]'s bin offset, last bin and first row.
@@ -52,22 +48,15 @@ impl Fused {
     pub(super) fn new<const N: usize>(
         r: &Refine<N>,
         hat: impl Fn(usize, usize, usize) -> [f32; 2],
-        black: u8,
     ) -> Option<Self> {
         if N != 256 || !(1..=MAX_FRAMES).contains(&r.frames) || !available() {
             return None;
         }
         let p = r.frames;
         let entry = |j: usize, c: usize, z: usize| r.votes[(j * 3 + c) * N + z];
-        let mut fade = [0f32; 16];
-        for (k, f) in fade.iter_mut().enumerate() {
-            *f = entry(0, 0, 255 - k)[1];
-        }
         let fused = Self {
             frames: p,
-            votes: (0..p * 3 * N).map(|i| r.votes[i][0]).collect(),
-            fade,
-            black: black as i32,
+            votes: r.votes.clone(),
             // Padded for the kernel's 16-byte loads of a row (see `avx2::run`).
             rows: r.rows.iter().copied().chain([0.0; 3]).collect(),
             off: r.off,
@@ -78,12 +67,10 @@ impl Fused {
         for j in 0..p {
             for c in 0..3 {
                 for z in 0..N {
-                    let [vote, f] = entry(j, c, z);
+                    let [vote, _] = entry(j, c, z);
                     let w = hat_weight(j, p, z as u8);
                     let want = hat(j, c, z);
-                    if fused.factor(z as u8).to_bits() != f.to_bits()
-                        || w.to_bits() != want[0].to_bits()
-                        || (w * vote).to_bits() != want[1].to_bits()
+                    if w.to_bits() != want[0].to_bits() || (w * vote).to_bits() != want[1].to_bits()
                     {
                         return None;
                     }
@@ -97,16 +84,7 @@ impl Fused {
                 return None;
             }
         }
-        Some(fused)
-    }
-
-    /// The observed-code factor as the kernel computes it.
-    fn factor(&self, z: u8) -> f32 {
-        if z as i32 > self.black {
-            self.fade[(255 - z as usize).min(15)]
-        } else {
-            0.0
-        }
+        (fused.votes.len() == p * 3 * 256).then_some(fused)
     }
 
     /// Merges the first whole [`STEP`]s of one row: `rows` holds the row of every frame (8-bit
@@ -204,21 +182,15 @@ mod avx2 {
             let v: [f32; 8] = std::array::from_fn(|l| f((8 * q + l) % 3));
             _mm256_setr_ps(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])
         };
-        let chan: [__m256i; 3] = std::array::from_fn(|q| lane(q, &|c| (c * 256) as i32));
         let start: [__m256i; 3] = std::array::from_fn(|q| lane(q, &|c| k.start[c]));
         let off: [__m256; 3] = std::array::from_fn(|q| lane_f(q, &|c| k.off[c]));
         let last: [__m256; 3] = std::array::from_fn(|q| lane_f(q, &|c| k.last[c]));
-        let fd = &k.fade;
-        let fade_lo = _mm256_setr_ps(fd[0], fd[1], fd[2], fd[3], fd[4], fd[5], fd[6], fd[7]);
-        let fade_hi = _mm256_setr_ps(fd[8], fd[9], fd[10], fd[11], fd[12], fd[13], fd[14], fd[15]);
-        let black = _mm256_set1_epi32(k.black);
         let zero = _mm256_setzero_ps();
         let bins = _mm256_set1_ps(super::super::refine::BINS_PER_STOP);
         // The last row's first entry: every row index is clamped to `0 ..= max_base` (a clamped
         // bin is in range by construction; the clamp keeps every read in bounds whatever it holds).
         let max_base = _mm256_set1_epi32((k.rows.len() - 3 - P) as i32);
         let stride = _mm256_set1_epi32(P as i32);
-        let votes = k.votes.as_ptr();
         let wrows = k.rows.as_ptr();
         // Blocks of up to BLOCK vectors, each in two stages: the hat's estimate and weight row
         // of every vector, then every vector's refinement. A vector's work is one long chain
@@ -228,6 +200,7 @@ mod avx2 {
         let mut e0s = [zero; BLOCK];
         let mut bases = [_mm256_setzero_si256(); BLOCK];
         let mut vs = [[zero; P]; BLOCK];
+        let mut fs = [[zero; P]; BLOCK];
         let code_at = |j: usize, s: usize| {
             let b: [u8; 8] = match codes[j][s..s + 8].try_into() {
                 Ok(b) => b,
@@ -241,17 +214,13 @@ mod avx2 {
             for v in 0..count {
                 let s = s0 + 8 * v;
                 let q = (s / 8) % 3;
-                let vote = &mut vs[v];
                 let (mut num, mut den, mut gn, mut gd) = (zero, zero, zero, zero);
-                for (j, vj) in vote.iter_mut().enumerate() {
+                for j in 0..P {
                     let z = code_at(j, s);
-                    // SAFETY: frame j's votes are `3 · 256` values from `votes + 768 j`, and
-                    // the index is a channel's 256 codes (`chan` ≤ 512) plus a code (≤ 255).
-                    *vj = unsafe {
-                        _mm256_i32gather_ps::<4>(votes.add(j * 768), _mm256_add_epi32(z, chan[q]))
-                    };
+                    let (vj, fj) = lookup(&k.votes[j * 768..j * 768 + 768], &codes[j][s..s + 8], q);
+                    (vs[v][j], fs[v][j]) = (vj, fj);
                     let w = hat_weight::<P>(j, z);
-                    let wv = _mm256_mul_ps(w, *vj);
+                    let wv = _mm256_mul_ps(w, vj);
                     // The hat's sums, three frames to a group as the scalar path adds them.
                     if j % 3 == 0 {
                         (gd, gn) = (w, wv);
@@ -285,67 +254,35 @@ mod avx2 {
             }
             for v in 0..count {
                 let s = s0 + 8 * v;
-                // Every frame's weight for the 8 samples: up to four frames by one 16-byte load a
-                // sample and a transpose, more by gathers.
+                // Every frame's weight for the 8 samples: four frames at a time by one 16-byte
+                // load a sample and a transpose.
                 let mut wrow = [zero; P];
-                if P <= 4 {
-                    let mut b = [0i32; 8];
-                    // SAFETY: `b` is 8 writable `i32`s.
-                    unsafe { _mm256_storeu_si256(b.as_mut_ptr().cast(), bases[v]) };
-                    // SAFETY: 0 ≤ base ≤ (rows.len() − 3) − P (clamped above) with P ≥ 1, and
-                    // `rows` has 3 values of padding, so the 4 values from a base are in it.
-                    let ld = |i: usize| unsafe { _mm_loadu_ps(wrows.add(b[i] as usize)) };
+                let mut b = [0i32; 8];
+                // SAFETY: `b` is 8 writable `i32`s.
+                unsafe { _mm256_storeu_si256(b.as_mut_ptr().cast(), bases[v]) };
+                for (g, cols) in wrow.chunks_mut(4).enumerate() {
+                    // SAFETY: 0 ≤ base ≤ (rows.len() − 3) − P (clamped above), and the values
+                    // read are `base + 4 g ..= base + 4 g + 3 ≤ base + P + 2` (as `4 g < P`).
+                    let ld = |i: usize| unsafe { _mm_loadu_ps(wrows.add(b[i] as usize + 4 * g)) };
                     let r0 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(0)), ld(4));
                     let r1 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(1)), ld(5));
                     let r2 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(2)), ld(6));
                     let r3 = _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(ld(3)), ld(7));
                     let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
                     let (t2, t3) = (_mm256_unpacklo_ps(r2, r3), _mm256_unpackhi_ps(r2, r3));
-                    let cols = [
-                        _mm256_castpd_ps(_mm256_unpacklo_pd(
-                            _mm256_castps_pd(t0),
-                            _mm256_castps_pd(t2),
-                        )),
-                        _mm256_castpd_ps(_mm256_unpackhi_pd(
-                            _mm256_castps_pd(t0),
-                            _mm256_castps_pd(t2),
-                        )),
-                        _mm256_castpd_ps(_mm256_unpacklo_pd(
-                            _mm256_castps_pd(t1),
-                            _mm256_castps_pd(t3),
-                        )),
-                        _mm256_castpd_ps(_mm256_unpackhi_pd(
-                            _mm256_castps_pd(t1),
-                            _mm256_castps_pd(t3),
-                        )),
+                    let pd = _mm256_castps_pd;
+                    let all = [
+                        _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t0), pd(t2))),
+                        _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t0), pd(t2))),
+                        _mm256_castpd_ps(_mm256_unpacklo_pd(pd(t1), pd(t3))),
+                        _mm256_castpd_ps(_mm256_unpackhi_pd(pd(t1), pd(t3))),
                     ];
-                    wrow.copy_from_slice(&cols[..P]);
-                } else {
-                    for (j, w) in wrow.iter_mut().enumerate() {
-                        // SAFETY: 0 ≤ base ≤ rows.len() − 3 − P (clamped above) and j < P.
-                        *w = unsafe {
-                            _mm256_i32gather_ps::<4>(
-                                wrows,
-                                _mm256_add_epi32(bases[v], _mm256_set1_epi32(j as i32)),
-                            )
-                        };
-                    }
+                    let m = cols.len();
+                    cols.copy_from_slice(&all[..m]);
                 }
                 let (mut n2, mut d2) = (zero, zero);
                 for j in 0..P {
-                    let z = code_at(j, s);
-                    let kk = _mm256_min_epi32(
-                        _mm256_sub_epi32(_mm256_set1_epi32(255), z),
-                        _mm256_set1_epi32(15),
-                    );
-                    let lo = _mm256_permutevar8x32_ps(fade_lo, kk);
-                    let hi = _mm256_permutevar8x32_ps(fade_hi, kk);
-                    let f = _mm256_blendv_ps(
-                        lo,
-                        hi,
-                        _mm256_castsi256_ps(_mm256_cmpgt_epi32(kk, _mm256_set1_epi32(7))),
-                    );
-                    let f = _mm256_and_ps(f, _mm256_castsi256_ps(_mm256_cmpgt_epi32(z, black)));
+                    let f = fs[v][j];
                     let wt = _mm256_mul_ps(f, wrow[j]);
                     n2 = _mm256_add_ps(n2, _mm256_mul_ps(wt, vs[v][j]));
                     d2 = _mm256_add_ps(d2, wt);
@@ -365,6 +302,38 @@ mod avx2 {
             s0 += 8 * count;
         }
         n
+    }
+
+    /// The votes and factors `table[256 c + z]` of eight codes `z` of one frame, the codes of
+    /// the `q`-th vector of a step (lane `l`'s channel `c = (8 q + l) mod 3`): each entry by one
+    /// 8-byte load, two to a 16-byte half, split by two shuffles.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn lookup(table: &[[f32; 2]], z: &[u8], q: usize) -> (__m256, __m256) {
+        let (Ok(table), Ok(z)) = (<&[[f32; 2]; 768]>::try_from(table), <&[u8; 8]>::try_from(z))
+        else {
+            unreachable!("a frame's entries and eight codes")
+        };
+        let at = |l: usize| {
+            table[((8 * q + l) % 3) * 256 + z[l] as usize]
+                .as_ptr()
+                .cast::<f64>()
+        };
+        // SAFETY: each pointer is to an entry of two `f32`s, eight readable bytes (`movsd` and
+        // `movhpd` need no alignment).
+        let pair = |l: usize| unsafe { _mm_loadh_pd(_mm_load_sd(at(l)), at(l + 1)) };
+        let half = |l: usize, h: usize| {
+            _mm256_castpd_ps(_mm256_insertf128_pd::<1>(
+                _mm256_castpd128_pd256(pair(l)),
+                pair(h),
+            ))
+        };
+        // a = [v0 f0 v1 f1 | v4 f4 v5 f5], b = [v2 f2 v3 f3 | v6 f6 v7 f7].
+        let (a, b) = (half(0, 4), half(2, 6));
+        (
+            _mm256_shuffle_ps::<0b10_00_10_00>(a, b),
+            _mm256_shuffle_ps::<0b11_01_11_01>(a, b),
+        )
     }
 
     /// `super::hat_weight` for eight codes.
@@ -485,7 +454,7 @@ pub(super) mod tests {
                     |j, _c, z| super::super::hat::weight(z, j, p, Weighting::Hat),
                     g,
                 );
-                let fused = super::Fused::new(&refine, |j, c, z| hat.entry(j, c, z), black);
+                let fused = super::Fused::new(&refine, |j, c, z| hat.entry(j, c, z));
                 assert_eq!(
                     fused.is_some(),
                     p <= super::MAX_FRAMES,

@@ -465,7 +465,7 @@ fn merge_codes<T: Code, const N: usize>(
     let refine = match (opts.weighting, &noise_est) {
         (Weighting::Noise, Some(e)) => {
             let mut r = Refine::<N>::new(lt, response, &e.model, opts.black_level, g);
-            r.fused = fused::Fused::new(&r, |j, c, z| luts.entry(j, c, z), opts.black_level);
+            r.fused = fused::Fused::new(&r, |j, c, z| luts.entry(j, c, z));
             Some(r)
         }
         _ => None,
