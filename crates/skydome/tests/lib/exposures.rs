@@ -206,21 +206,10 @@ fn self_calibrated_measured_exposures_are_within_0_04_stops_of_the_truth() {
 }
 
 /// Per channel, log2 RMSE (stops) of `a` against `truth` over `mask`, after one scale per
-/// channel; the RMS over the channels.
+/// channel ([`crate::noise_merge::log2_rmse_per_channel`]); the RMS over the channels.
 fn log2_rmse(a: &skydome::HdrImage, truth: &skydome::HdrImage, mask: &[bool]) -> f64 {
-    let per: Vec<f64> = (0..3)
-        .map(|c| {
-            let d: Vec<f64> = mask
-                .iter()
-                .enumerate()
-                .filter(|(p, &m)| m && truth.data[3 * p + c] > 0.0 && a.data[3 * p + c] > 0.0)
-                .map(|(p, _)| (a.data[3 * p + c] as f64 / truth.data[3 * p + c] as f64).log2())
-                .collect();
-            let mean = d.iter().sum::<f64>() / d.len() as f64;
-            d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / d.len() as f64
-        })
-        .collect();
-    (per.iter().sum::<f64>() / 3.0).sqrt()
+    let per = crate::noise_merge::log2_rmse_per_channel(a, truth, mask);
+    (per.iter().map(|e| e * e).sum::<f64>() / 3.0).sqrt()
 }
 
 /// The pipeline with `--exposures measured` on brackets whose listed times are wrong: the

@@ -28,7 +28,7 @@ fn phone(evs: &[f64], seed: u64, size: usize, fisheye: bool) -> SynthBracket {
 
 /// Per channel, log2 RMSE (stops) against the truth inside `mask`, after one least-squares
 /// scale per channel in the log domain.
-fn log2_rmse_per_channel(a: &HdrImage, truth: &HdrImage, mask: &[bool]) -> [f64; 3] {
+pub(crate) fn log2_rmse_per_channel(a: &HdrImage, truth: &HdrImage, mask: &[bool]) -> [f64; 3] {
     [0, 1, 2].map(|c| {
         let d: Vec<f64> = mask
             .iter()
