@@ -342,6 +342,11 @@ pub fn meta_dict<'py>(py: Python<'py>, meta: &HdrMeta) -> PyResult<Bound<'py, Py
 ///     absolute.
 /// weighting
 ///     Frame weighting of the merge: "hat" (default), "noise" or "none".
+/// exposures
+///     "listed" (default): the given or EXIF times, checked against the photos (frames more
+///     than 1/3 stop off are named in a warning and in ``report["exposures"]``); "measured":
+///     the exposures measured from the photos, anchored on the listed time of the frame that
+///     agrees best (as the command line's ``--exposures``).
 /// preview
 ///     Also make the tone-mapped preview (:attr:`Dome.preview`).
 /// equirect
@@ -361,12 +366,12 @@ pub fn meta_dict<'py>(py: Python<'py>, meta: &HdrMeta) -> PyResult<Bound<'py, Py
 #[pyfunction]
 #[pyo3(signature = (frames, times=None, *, profile=None, lens=None, fisheye=false,
     lens_model=None, fov=None, crop=false, sun=None, north=None, time=None, lat=None, lon=None,
-    illuminance=None, luminance=None, weighting="hat", preview=false, equirect=None,
-    progress=None, circle=None),
+    illuminance=None, luminance=None, weighting="hat", exposures="listed", preview=false,
+    equirect=None, progress=None, circle=None),
     text_signature = "(frames, times=None, *, profile=None, lens=None, fisheye=False, \
     lens_model=None, fov=None, crop=False, sun='auto', north=None, time=None, lat=None, \
-    lon=None, illuminance=None, luminance=None, weighting='hat', preview=False, equirect=None, \
-    progress=None, circle=None)")]
+    lon=None, illuminance=None, luminance=None, weighting='hat', exposures='listed', \
+    preview=False, equirect=None, progress=None, circle=None)")]
 #[allow(clippy::too_many_arguments)]
 pub fn run<'py>(
     py: Python<'py>,
@@ -386,6 +391,7 @@ pub fn run<'py>(
     illuminance: Option<f64>,
     luminance: Option<Vec<f64>>,
     weighting: &str,
+    exposures: &str,
     preview: bool,
     equirect: Option<Bound<'py, PyAny>>,
     progress: Option<Bound<'py, PyAny>>,
@@ -407,6 +413,7 @@ pub fn run<'py>(
         illuminance,
         luminance,
         weighting: weighting.to_string(),
+        exposures: exposures.to_string(),
         preview,
         equirect,
     }

@@ -39,6 +39,7 @@ pub struct RunArgs<'py> {
     pub illuminance: Option<f64>,
     pub luminance: Option<Vec<f64>>,
     pub weighting: String,
+    pub exposures: String,
     pub preview: bool,
     pub equirect: Option<Bound<'py, PyAny>>,
 }
@@ -77,6 +78,10 @@ impl RunArgs<'_> {
             .weighting
             .parse()
             .map_err(|e: skydome::UnknownName| value_error("weighting", e))?;
+        o.exposures = self
+            .exposures
+            .parse()
+            .map_err(|e: skydome::UnknownName| value_error("exposures", e))?;
         let lens = self.lens.as_ref().filter(|l| !l.is_none());
         if lens.is_some() && self.fisheye {
             return Err(value_error(

@@ -17,11 +17,12 @@ def test_run_signature_is_the_issue_s():
     sig = inspect.signature(skydome.run)
     assert list(sig.parameters) == [
         "frames", "times", "profile", "lens", "fisheye", "lens_model", "fov", "crop", "sun",
-        "north", "time", "lat", "lon", "illuminance", "luminance", "weighting", "preview",
-        "equirect", "progress", "circle",
+        "north", "time", "lat", "lon", "illuminance", "luminance", "weighting", "exposures",
+        "preview", "equirect", "progress", "circle",
     ]
     p = sig.parameters
     assert p["sun"].default == "auto" and p["weighting"].default == "hat"
+    assert p["exposures"].default == "listed"
     assert p["fisheye"].default is False and p["times"].default is None
     assert all(p[n].kind == inspect.Parameter.KEYWORD_ONLY for n in list(p)[2:])
 

@@ -137,6 +137,7 @@ def test_bad_arguments_name_the_argument():
     frames, times = demo_frames()
     cases = [
         (dict(weighting="bogus"), ValueError, "^weighting: 'bogus' is not a weighting; expected one of: none, hat, noise"),
+        (dict(exposures="guessed"), ValueError, "^exposures: 'guessed' is not a"),
         (dict(sun=5), TypeError, "^sun: expected 'auto', 'none', 'ephemeris' or \\(x, y\\)"),
         (dict(sun="moon"), ValueError, "^sun: 'moon'"),
         (dict(north="south"), ValueError, "^north: 'south'"),

@@ -117,6 +117,7 @@ def run(
     illuminance: Optional[float] = None,
     luminance: Union[Tuple[float, float, float], Tuple[float, float, float, float], None] = None,
     weighting: Literal["hat", "noise", "none"] = "hat",
+    exposures: Literal["listed", "measured"] = "listed",
     preview: bool = False,
     equirect: Union[bool, int, None] = None,
     progress: Optional[Callable[[Stage, float], Any]] = None,
