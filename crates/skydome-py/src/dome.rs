@@ -343,10 +343,10 @@ pub fn meta_dict<'py>(py: Python<'py>, meta: &HdrMeta) -> PyResult<Bound<'py, Py
 /// weighting
 ///     Frame weighting of the merge: "hat" (default), "noise" or "none".
 /// exposures
-///     "listed" (default): the given or EXIF times, checked against the photos (frames more
-///     than 1/3 stop off are named in a warning and in ``report["exposures"]``); "measured":
-///     the exposures measured from the photos, anchored on the listed time of the frame that
-///     agrees best (as the command line's ``--exposures``).
+///     "listed" (default): the given or EXIF times as they are; "measured": the exposures
+///     measured from the photos, anchored on the listed time of the frame that agrees best
+///     (as the command line's ``--exposures``), each frame's listed and measured exposure in
+///     ``report["exposures"]`` and a warning naming frames more than 1/3 stop off.
 /// preview
 ///     Also make the tone-mapped preview (:attr:`Dome.preview`).
 /// equirect

@@ -112,6 +112,7 @@ def test_measured_exposures_match_the_cli(cli, tmp_path):
     assert ex["frames"][0]["off_stops"] < -0.9
     assert abs(np.log2(ex["frames"][0]["measured_s"] / times[0])) < 0.1
 
+    # The listed times are taken as they are (no measurement in the report).
     listed = skydome.run(frames, wrong, profile=profile)
-    assert listed.report["exposures"]["source"] == "listed"
-    assert [f["off"] for f in listed.report["exposures"]["frames"]][0]
+    assert "exposures" not in listed.report
+    assert listed.radiance.tobytes() != dome.radiance.tobytes()

@@ -74,10 +74,10 @@ pub const MIN_VALUES: usize = 300;
 pub const WELL_LO: u8 = 20;
 /// Codes up to which a value counts as well exposed.
 pub const WELL_HI: u8 = 235;
-/// At most about this many pixels per pair are read (a stride through larger frames). Every
-/// merge checks its listed times, so this is paid by every run: 250 000 cost a 12 MP bracket
-/// about 40 ms of the CLI's 0.5 s; at 65 536 the interquartile mean of up to 196 608 channel
-/// values still has a standard error far below the 0.02 stops the measurement is tested to.
+/// At most about this many pixels per pair are read (a stride through larger frames): 250 000
+/// cost a 12 MP bracket about 40 ms of the CLI's 0.5 s per measurement; at 65 536 the
+/// interquartile mean of up to 196 608 channel values still has a standard error far below
+/// the 0.02 stops the measurement is tested to.
 const PIXELS_PER_PAIR: usize = 65_536;
 
 /// One frame's listed and measured exposure.
