@@ -380,6 +380,15 @@ fn median(v: &[f64]) -> f64 {
     }
 }
 
+/// Frame `k`'s measured exposure in `m`: the anchor keeps its listed exposure exactly (not
+/// `exp(ln(listed))`, which can differ in the last bit); the others [`with_relative`].
+fn measured_exposure(f: &Frame, m: &Measurement, k: usize) -> Exposure {
+    match k == m.anchor {
+        true => f.exposure,
+        false => with_relative(f.exposure, m.log_exposure[k]),
+    }
+}
+
 /// A frame's exposure with the relative exposure `exp(log_relative)` at its own ISO and
 /// f-number (only the time changes).
 fn with_relative(e: Exposure, log_relative: f64) -> Exposure {
@@ -403,7 +412,7 @@ pub fn report(
         if k > 0 && !m.same[k - 1] {
             group_first = k;
         }
-        let measured = with_relative(f.exposure, m.log_exposure[k]);
+        let measured = measured_exposure(f, m, k);
         out.push(FrameExposure {
             file: f.name.clone(),
             listed_s: f.exposure.time_s,
@@ -431,7 +440,7 @@ pub fn apply(frames: &mut Vec<Frame>, m: &Measurement) -> Vec<Frame> {
     let mut kept = Vec::with_capacity(frames.len());
     let mut left_out = Vec::new();
     for (k, mut f) in std::mem::take(frames).into_iter().enumerate() {
-        f.exposure = with_relative(f.exposure, m.log_exposure[k]);
+        f.exposure = measured_exposure(&f, m, k);
         match k > 0 && m.same[k - 1] {
             true => left_out.push(f),
             false => kept.push(f),
