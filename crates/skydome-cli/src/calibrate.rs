@@ -190,6 +190,8 @@ struct Report<'a> {
     alignment: Option<skydome::align::Alignment>,
     stability: Option<response::Stability>,
     sweep: Vec<SweepRow>,
+    /// The noise model fitted to the bracket and stored in the profile.
+    noise: Option<skydome::noise::NoiseEstimate>,
     written: Vec<String>,
 }
 
@@ -218,6 +220,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         alignment,
         stability: None,
         sweep: Vec::new(),
+        noise: None,
         written: Vec::new(),
     };
     let spin = io::spinner(quiet, "calibrating");
@@ -271,6 +274,13 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         }
         CameraProfile::from_calibration(&calibration)
     };
+    // The noise model a merge with this profile uses instead of fitting its own (black level
+    // 0: a merge with `--black-level` still uses it). Stored with what came from the prior.
+    report.noise = Some(
+        profile
+            .estimate_noise(&br.frames, 0)
+            .context("noise model")?,
+    );
     spin.finish_and_clear();
     skydome::pipeline::describe_camera(&mut profile, &br);
     outputs.add(&a.output, profile.to_json().into_bytes());
@@ -306,6 +316,20 @@ fn print_report(r: &Report) {
         crate::out(&format!(
             "codes constrained by data: R {}..{}, G {}..{}, B {}..{} ({} samples added to fill code bands); outside them the curve is extrapolated",
             cr[0][0], cr[0][1], cr[1][0], cr[1][1], cr[2][0], cr[2][1], s.band_samples
+        ));
+    }
+    if let Some(n) = &r.noise {
+        let g = n.gains();
+        let stored = if n.from_prior == skydome::noise::FromPrior::ALL {
+            "not stored: nothing measurable, a merge fits its own".to_string()
+        } else if n.fitted {
+            "fitted, stored in the profile".to_string()
+        } else {
+            format!("stored, {} from the prior", n.from_prior.names())
+        };
+        crate::out(&format!(
+            "noise model: {:.0} / {:.0} / {:.0} e- at code 128 (R/G/B), read noise {:.1} e-; {stored}",
+            g[0], g[1], g[2], n.model.channels[1].read_noise
         ));
     }
     if let Some(al) = &r.alignment {

@@ -293,6 +293,11 @@ pub fn calibrate(
                 warnings,
             )
         };
+        // The noise model merges with this profile use instead of fitting their own, as
+        // `skydome calibrate` stores it.
+        profile
+            .estimate_noise(&br.frames, 0)
+            .map_err(|e| Failure::Message(format!("noise model: {e}")))?;
         pipeline::describe_camera(&mut profile, &br);
         let mut all = br.warnings.clone();
         all.extend(warnings);

@@ -10,7 +10,9 @@
 //! the hat's median are printed. Wall time is printed beside them.
 //!
 //! Run: `cargo bench -p skydome --bench noise_cost` (`SKYDOME_COST_CALLS`, default 9;
-//! `SKYDOME_COST_CASES`, e.g. `6:3,12:3`, default all six).
+//! `SKYDOME_COST_CASES`, e.g. `6:3,12:3`, default all six; `SKYDOME_COST_ONLY`, one of `hat`,
+//! `given`, `fit`, `with-fit`, calls only that one, e.g. to count its instructions with
+//! `valgrind --tool=callgrind` — the others' columns then read 0).
 
 use skydome::bracket::Frame;
 use skydome::merge::{merge, merge_into, MergeOptions, Weighting};
@@ -70,6 +72,12 @@ fn main() {
                 .collect()
         })
         .unwrap_or_else(|| vec![(6, 3), (6, 5), (6, 9), (12, 3), (12, 5), (12, 9)]);
+    let only = std::env::var("SKYDOME_COST_ONLY").ok().map(|s| {
+        ["hat", "given", "fit", "with-fit"]
+            .iter()
+            .position(|&n| n == s)
+            .expect("SKYDOME_COST_ONLY: hat, given, fit or with-fit")
+    });
     println!(
         "| case | hat | noise, model given | fit alone | noise with its fit | (wall: hat, given, with fit) |"
     );
@@ -93,6 +101,11 @@ fn main() {
         let mut wall: [Vec<f64>; 4] = Default::default();
         for _ in 0..calls + 1 {
             for (k, (c, w)) in cpu.iter_mut().zip(wall.iter_mut()).enumerate() {
+                if only.is_some_and(|o| o != k) {
+                    c.push(0.0);
+                    w.push(0.0);
+                    continue;
+                }
                 let (t0, c0) = (Instant::now(), cpu_ns());
                 match k {
                     0 => merge_into(black_box(&frames), &r, &hat, &mut out).expect("hat"),

@@ -6,8 +6,9 @@
 //! It sits above the response, noise and merge modules because it holds a piece of each (see
 //! the layer table in the crate documentation).
 
+use crate::bracket::Frame;
 use crate::merge::Weighting;
-use crate::noise::NoiseModel;
+use crate::noise::{self, FromPrior, NoiseEstimate, NoiseModel};
 use crate::response::{Calibration, Response, ResponseError};
 
 /// Current [`CameraProfile`] format version (defined beside [`ResponseError::Version`], which
@@ -30,6 +31,9 @@ pub use crate::response::PROFILE_VERSION;
 /// - `make`, `model`, `iso`, `date`: where it came from (free text; `date` as the CLI writes it).
 /// - `absolute` (optional, see [`AbsoluteConstant`]): the camera's absolute constant, which
 ///   makes every later merge with this profile absolute from EXIF exposure data alone.
+/// - `noise` (optional, see [`NoiseModel`]) and `noise_from_prior` (optional, see
+///   [`FromPrior`]): the noise model a merge with this profile uses instead of fitting one to
+///   its frames, and which of its parameters the calibration bracket could not measure.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CameraProfile {
     /// Format version ([`PROFILE_VERSION`]).
@@ -60,6 +64,12 @@ pub struct CameraProfile {
     /// estimates it from the bracket.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise: Option<Box<NoiseModel>>,
+    /// Which parameters of [`noise`](Self::noise) are the prior's ([`NoiseModel::default`]),
+    /// because the bracket it was fitted on could not measure them (on real JPEG brackets
+    /// typically the white balance). Optional: absent, every parameter counts as measured
+    /// (profiles written before it existed stored a model only when it was fully fitted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_from_prior: Option<FromPrior>,
     /// The camera's absolute constant, when it was measured (a meter reading) or estimated
     /// (the reflected-light meter equation). Optional: profiles without it load as before and
     /// their merges stay relative.
@@ -154,6 +164,7 @@ impl CameraProfile {
             iso: None,
             date: None,
             noise: None,
+            noise_from_prior: None,
             absolute: None,
         }
     }
@@ -174,6 +185,7 @@ impl CameraProfile {
             iso: None,
             date: None,
             noise: None,
+            noise_from_prior: None,
             absolute: None,
         }
     }
@@ -218,6 +230,48 @@ impl CameraProfile {
             }
         }
         Ok(p)
+    }
+
+    /// Stores the noise model of `est` (a fit from the frames, [`noise::estimate`]) with what
+    /// came from the prior, so that merges with this profile use it and do not fit their own
+    /// ([`Weighting::Noise`], the consistency test, the standard error). A fit that measured
+    /// nothing (every parameter the prior's: too few pixels well exposed in two frames) is not
+    /// stored: a merge then fits its own bracket, which may show more.
+    pub fn set_noise(&mut self, est: &NoiseEstimate) {
+        if est.from_prior == FromPrior::ALL || !est.model.is_valid() {
+            return;
+        }
+        self.noise = Some(Box::new(est.model));
+        self.noise_from_prior = est.from_prior.any().then_some(est.from_prior);
+    }
+
+    /// Fits the noise model to `frames` (sorted shortest first) with this profile's response
+    /// and a black level of `black` (8-bit codes), and stores it ([`set_noise`](Self::set_noise)),
+    /// as `skydome calibrate` does. Returns the fit.
+    pub fn estimate_noise(
+        &mut self,
+        frames: &[Frame],
+        black: u8,
+    ) -> Result<NoiseEstimate, ResponseError> {
+        let est = noise::estimate(frames, &self.response()?, black, None);
+        self.set_noise(&est);
+        Ok(est)
+    }
+
+    /// The stored noise model as the merge reports it: the model, with
+    /// [`NoiseEstimate::from_prior`] and [`NoiseEstimate::fitted`] from `noise_from_prior`.
+    /// `None` without a valid model.
+    pub fn noise_estimate(&self) -> Option<NoiseEstimate> {
+        let model = **self.noise.as_ref()?;
+        if !model.is_valid() {
+            return None;
+        }
+        let mut est = NoiseEstimate::given(model);
+        if let Some(p) = self.noise_from_prior {
+            est.from_prior = p;
+            est.fitted = !p.any();
+        }
+        Some(est)
     }
 
     /// The response this profile describes (validated).

@@ -159,3 +159,50 @@ fn colour_hdri_histogram_samples_need_no_alignment() {
         "colour-hdri {e_hist}, default {e_default}"
     );
 }
+
+/// Issue 27 part 3: `skydome calibrate` stores the noise model (with what came from the prior)
+/// and `merge --profile --weighting noise` uses it instead of fitting one: the same `.hdr`
+/// bytes as a merge with the profile stripped of its model (which fits it on the same frames),
+/// and the report says the same about the model.
+#[test]
+fn calibrate_stores_the_noise_model_and_a_merge_with_it_gives_the_fits_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (steady, _, _) = steady_and_moved(tmp.path());
+    calibrate(&steady, false, tmp.path());
+    let stored = tmp.path().join("camera_.json");
+    let mut p: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stored).unwrap()).unwrap();
+    assert!(
+        p["noise"]["channels"][1]["electrons_at_gauge"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    p.as_object_mut().unwrap().remove("noise");
+    p.as_object_mut().unwrap().remove("noise_from_prior");
+    let stripped = tmp.path().join("stripped.json");
+    std::fs::write(&stripped, p.to_string()).unwrap();
+    let merged = |profile: &Path, name: &str| {
+        let out = tmp.path().join(name);
+        let extra: Vec<&std::ffi::OsStr> = vec![
+            "--profile".as_ref(),
+            profile.as_os_str(),
+            "--weighting".as_ref(),
+            "noise".as_ref(),
+            "--json".as_ref(),
+            "-o".as_ref(),
+            out.as_os_str(),
+        ];
+        let report = run(&args("merge", &steady, &extra));
+        (std::fs::read(&out).unwrap(), report["noise"].clone())
+    };
+    let (a, na) = merged(&stored, "stored.hdr");
+    let (b, nb) = merged(&stripped, "fitted.hdr");
+    assert!(a == b, "the .hdr differs");
+    for k in ["model", "fitted", "from_prior", "white_balance"] {
+        assert_eq!(na[k], nb[k], "{k}");
+    }
+    // The merge with the stored model fitted nothing.
+    assert_eq!(na["differences"], 0);
+    assert!(nb["differences"].as_u64().unwrap() > 0);
+}

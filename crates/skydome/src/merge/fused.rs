@@ -183,6 +183,8 @@ mod avx2 {
             _mm256_setr_ps(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])
         };
         let start: [__m256i; 3] = std::array::from_fn(|q| lane(q, &|c| k.start[c]));
+        // Where each lane's channel's entries start in a frame's table.
+        let chan: [__m256i; 3] = std::array::from_fn(|q| lane(q, &|c| 256 * c as i32));
         let off: [__m256; 3] = std::array::from_fn(|q| lane_f(q, &|c| k.off[c]));
         let last: [__m256; 3] = std::array::from_fn(|q| lane_f(q, &|c| k.last[c]));
         let zero = _mm256_setzero_ps();
@@ -217,7 +219,7 @@ mod avx2 {
                 let (mut num, mut den, mut gn, mut gd) = (zero, zero, zero, zero);
                 for j in 0..P {
                     let z = code_at(j, s);
-                    let (vj, fj) = lookup(&k.votes[j * 768..j * 768 + 768], &codes[j][s..s + 8], q);
+                    let (vj, fj) = lookup(&k.votes[j * 768..j * 768 + 768], z, chan[q]);
                     (vs[v][j], fs[v][j]) = (vj, fj);
                     let w = hat_weight::<P>(j, z);
                     let wv = _mm256_mul_ps(w, vj);
@@ -304,21 +306,25 @@ mod avx2 {
         n
     }
 
-    /// The votes and factors `table[256 c + z]` of eight codes `z` of one frame, the codes of
-    /// the `q`-th vector of a step (lane `l`'s channel `c = (8 q + l) mod 3`): each entry by one
-    /// 8-byte load, two to a 16-byte half, split by two shuffles.
+    /// The votes and factors `table[256 c + z]` of eight codes `z` (one frame's, widened to
+    /// 32 bits), `chan` holding each lane's `256 c`: each entry by one 8-byte load, two to a
+    /// 16-byte half, split by two shuffles. The eight indices are formed by one vector add and
+    /// stored for the loads to read (extracting each code from the bytes took the compiler a
+    /// shift, a move and a zero-extension per lane).
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn lookup(table: &[[f32; 2]], z: &[u8], q: usize) -> (__m256, __m256) {
-        let (Ok(table), Ok(z)) = (<&[[f32; 2]; 768]>::try_from(table), <&[u8; 8]>::try_from(z))
-        else {
-            unreachable!("a frame's entries and eight codes")
+    fn lookup(table: &[[f32; 2]], z: __m256i, chan: __m256i) -> (__m256, __m256) {
+        let Ok(table) = <&[[f32; 2]; 768]>::try_from(table) else {
+            unreachable!("a frame's entries")
         };
-        let at = |l: usize| {
-            table[((8 * q + l) % 3) * 256 + z[l] as usize]
-                .as_ptr()
-                .cast::<f64>()
-        };
+        // Clamped to the table whatever the codes hold (they are 0..=255 by construction).
+        let idx = _mm256_min_epu32(_mm256_add_epi32(z, chan), _mm256_set1_epi32(767));
+        let mut at = [0u32; 8];
+        // SAFETY: `at` is 8 writable `u32`s.
+        unsafe { _mm256_storeu_si256(at.as_mut_ptr().cast(), idx) };
+        let base = table.as_ptr();
+        // SAFETY: every index is at most 767, within the table.
+        let at = |l: usize| unsafe { base.add(at[l] as usize) }.cast::<f64>();
         // SAFETY: each pointer is to an entry of two `f32`s, eight readable bytes (`movsd` and
         // `movhpd` need no alignment).
         let pair = |l: usize| unsafe { _mm_loadh_pd(_mm_load_sd(at(l)), at(l + 1)) };

@@ -280,9 +280,13 @@ pub fn run(
         capture: capture.report,
         warnings,
     };
-    // The profile made by calibrating carries the noise model the merge fitted.
+    // The profile made by calibrating carries the noise model the merge fitted and used, with
+    // what came from the prior (on real JPEG brackets the white balance usually does), so a
+    // merge with it need not fit its own.
     let mut camera_profile = calibrated.profile.map(|mut prof| {
-        prof.noise = merged.noise.filter(|n| n.fitted).map(|n| Box::new(n.model));
+        if let Some(n) = &merged.noise {
+            prof.set_noise(n);
+        }
         prof
     });
     // A reading (or the meter equation) made this dome absolute: the camera's constant goes
@@ -577,14 +581,16 @@ fn merge_stage(
     progress: &mut Reporter<'_>,
 ) -> Result<MergeOutcome, PipelineError> {
     progress.at(Stage::Merging, 0.0)?;
-    let profile_noise = match &options.response {
-        ResponseSource::Profile(prof) => prof.noise.as_deref().copied(),
+    // A profile's noise model (with what in it came from the prior) stands in for a fit.
+    let profile_estimate = match &options.response {
+        ResponseSource::Profile(prof) => prof.noise_estimate(),
         ResponseSource::Calibrate(_) => None,
     };
+    let profile_noise = profile_estimate.map(|n| n.model);
     // The standard error needs a noise model; the frames are given back during the merge.
     let error_noise = options.products.confidence.then(|| match profile_noise {
-        Some(n) if n.is_valid() => n,
-        _ => noise::estimate(&br.frames, response, options.black_level, None).model,
+        Some(n) => n,
+        None => noise::estimate(&br.frames, response, options.black_level, None).model,
     });
     let log_exposures: Vec<f64> = br
         .frames
@@ -606,7 +612,7 @@ fn merge_stage(
         consistency: options.consistency || options.ghosts || options.products.consistency,
         ghosts: options.ghosts,
     };
-    let (merged, mut warnings) = match (window, prepared) {
+    let (mut merged, mut warnings) = match (window, prepared) {
         (Some(_), Some(p)) => merge_parts(
             p.parts,
             p.flags,
@@ -629,6 +635,12 @@ fn merge_stage(
         )?,
     };
     progress.at(Stage::Merging, 1.0)?;
+    // The merge reports a given model as fitted; the profile says what was the prior's.
+    if let (Some(n), Some(p)) = (merged.noise.as_mut(), profile_estimate) {
+        if n.model == p.model {
+            *n = p;
+        }
+    }
     if merged.clipped_high > 0 {
         warnings.push(format!(
             "{} pixels are clipped even in the shortest exposure; their radiance is a lower bound",

@@ -771,3 +771,78 @@ fn real_sets_listed_against_measured_exposures() {
         );
     }
 }
+
+/// Issue 27 part 3: a camera profile carries the noise model the merge uses, with what came
+/// from the prior, so a merge with the profile fits none. On every real set (where the fit
+/// leaves the white balance or more to the prior, which profiles used to drop): the model is
+/// stored, survives the JSON round trip exactly, and a noise-weighted merge with it gives the
+/// same bits as one that fits the model to the same frames itself.
+#[test]
+fn a_camera_profile_carries_the_noise_model_and_a_merge_with_it_fits_none() {
+    use skydome::camera::CameraProfile;
+    use skydome::noise::{FromPrior, NoiseEstimate};
+    let Some(sets) = real_sets() else { return };
+    let mut partly_prior = 0;
+    for (name, frames) in sets {
+        let cal = calibrate(&frames, None, &CalibrateOptions::default()).unwrap();
+        let mut p = CameraProfile::from_calibration(&cal);
+        let est = p.estimate_noise(&frames, 0).unwrap();
+        println!(
+            "{name}: fitted {}, from prior [{}]",
+            est.fitted,
+            est.from_prior.names()
+        );
+        assert_ne!(est.from_prior, FromPrior::ALL, "{name}: nothing measured");
+        assert_eq!(p.noise.as_deref(), Some(&est.model), "{name}");
+        assert_eq!(
+            p.noise_from_prior,
+            est.from_prior.any().then_some(est.from_prior),
+            "{name}"
+        );
+        partly_prior += est.from_prior.any() as usize;
+        let q = CameraProfile::from_json(&p.to_json()).unwrap();
+        assert_eq!(q, p, "{name}: the profile changed in the JSON round trip");
+        let stored = q.noise_estimate().unwrap();
+        assert_eq!(stored.model, est.model, "{name}");
+        assert_eq!(
+            (stored.fitted, stored.from_prior),
+            (est.fitted, est.from_prior),
+            "{name}"
+        );
+        let r = q.response().unwrap();
+        let fit = MergeOptions {
+            weighting: Weighting::Noise,
+            ..Default::default()
+        };
+        let given = MergeOptions {
+            noise: q.noise.as_deref().copied(),
+            ..fit
+        };
+        let a = merge(&frames, &r, &fit).unwrap();
+        let b = merge(&frames, &r, &given).unwrap();
+        assert_eq!(a.noise.unwrap().model, b.noise.unwrap().model, "{name}");
+        assert_eq!(b.noise.unwrap().differences, 0, "{name}: the merge fitted");
+        let differ = (a.radiance.data.iter())
+            .zip(&b.radiance.data)
+            .filter(|(x, y)| x.to_bits() != y.to_bits())
+            .count();
+        assert_eq!(differ, 0, "{name}: {differ} samples differ");
+    }
+    assert!(
+        partly_prior > 0,
+        "no real set left a parameter to the prior"
+    );
+    // A fit that measured nothing is not stored (a merge fits its own bracket), and profiles
+    // written before the noise fields existed load without them.
+    let mut p = CameraProfile::linear();
+    p.set_noise(&NoiseEstimate {
+        from_prior: FromPrior::ALL,
+        fitted: false,
+        ..NoiseEstimate::given(Default::default())
+    });
+    assert_eq!((p.noise.as_ref(), p.noise_from_prior), (None, None));
+    let old: serde_json::Value = serde_json::from_str(&p.to_json()).unwrap();
+    assert!(old.get("noise").is_none() && old.get("noise_from_prior").is_none());
+    let q = CameraProfile::from_json(&old.to_string()).unwrap();
+    assert!(q.noise_estimate().is_none());
+}
