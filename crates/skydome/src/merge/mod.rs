@@ -114,10 +114,11 @@ pub enum Weighting {
     /// given the hat's first estimate (two passes, as Granados et al. 2010): a longer exposure,
     /// which collected more light, counts for more. Zero at the black level and 255, fading to
     /// zero over the top codes; a frame expected within 5 codes of clipping gets no weight. On
-    /// phone-like brackets about 30 % less error than the hat on the sky, at about 2.9× the
-    /// hat's merge time with the noise model given and 3.1× with its fit from the frames (6 MP,
-    /// CPU time on 2 cores; each row is refined right after the hat has merged it, from one
-    /// weight row per 1/32-stop bin of the hat's estimate). On the
+    /// phone-like brackets about 30 % less error than the hat on the sky, at about 1.6× the
+    /// hat's merge time with the noise model given (a camera profile's) and 1.8× with its fit
+    /// from the frames (6 MP, 3 frames, CPU time on 2 cores, the AVX2 kernel; each row is
+    /// refined right after the hat has merged it, from one weight row per 1/32-stop bin of the
+    /// hat's estimate). On the
     /// synthetic brackets of `tests/lib/oracle.rs` its error is 1.04–1.26× the oracle's (true
     /// curve and true noise) where the hat's is 1.37–2.45×. Not the default yet: its cost is
     /// above the 1.3× of the hat that issue 27 allows, and the noise fit reaches a bound on
