@@ -3,7 +3,8 @@
 // preview, the tab's peak memory (renderer process resident set, sampled every 100 ms; the
 // worker runs in the same process), the wasm linear memory's high-water mark, and the native
 // CLI's time for the same frames and options (and its stage times). Also the gzipped .wasm size.
-//   node measure.mjs [--size 3464] [--evs -2,0,2] [--threads N] [--out results.json]
+//   node measure.mjs [--size 3464] [--evs -2,0,2] [--threads N] [--out results.json] [--again] [--idle MS]
+// --again merges the same photos a second time in the same page (`again` in the output).
 // --evs gives the frames' exposure values (`skydome synth --evs`): -4,-3,-2,-1,0,1,2,3,4 is a
 // phone's 9-frame bracket.
 // --threads N loads the page with ?threads=N: the threaded core with a pool of N workers (the
@@ -31,6 +32,8 @@ const outFile = arg('--out', null);
 const threads = arg('--threads', null);
 const evs = arg('--evs', '-2,0,2');
 const memory = arg('--memory', null);
+// --idle MS: how long the app sits loaded before the photos are picked (default 1000 ms).
+const idleMs = Number(arg('--idle', '1000'));
 
 /** Memory of this test's Chromium renderer processes (command lines carry the fresh profile's
  *  folder, so other Chromium instances on the machine are not counted): for each, the resident
@@ -110,7 +113,7 @@ try {
   await onScreen(p.page, 'camera');
   await p.page.waitForFunction(() => document.body.dataset.core);
   await setSettings(p.page, { fisheye: true, sun: 'auto', north: '0', equirect: false });
-  await p.page.waitForTimeout(1000);
+  await p.page.waitForTimeout(idleMs);
   sample(p.profile);
   const baseline = tabPeak();
   peaks.clear();
@@ -135,6 +138,21 @@ try {
   const wasm = await p.page.evaluate(() => window.__skydomeAsk('memory'));
   const coreInfo = await p.page.evaluate(() => window.__skydomeCore);
   const streamed = await p.page.evaluate(() => window.__skydomeStreamed);
+  // --again: the same photos picked a second time in the same page (the core's code compiled
+  // and its memory touched by the first merge).
+  let again = null;
+  if (process.argv.includes('--again')) {
+    await p.page.waitForTimeout(1000);
+    const since2 = await p.page.evaluate(() => Date.now());
+    await p.page.setInputFiles('#gallery', [...frames, path.join(dir, 'times.txt')]);
+    const msg2 = await resultOrError(p.page, since2);
+    if (msg2) throw new Error(msg2);
+    const stages2 = await p.page.evaluate(() => window.__skydomeStageMs);
+    again = {
+      browser_core_s: (await p.page.evaluate(() => window.__skydomeCoreMs)) / 1000,
+      browser_stage_s: Object.fromEntries(Object.entries(stages2).map(([k, v]) => [k, v / 1000])),
+    };
+  }
   // The .wasm the page loaded.
   const wasmFile = path.join(appDir, coreInfo && coreInfo.build === 'threaded' ? 'pkg-mt' : 'pkg', 'skydome_web_bg.wasm');
   const gz = gzipSync(readFileSync(wasmFile), { level: 9 }).length;
@@ -161,6 +179,7 @@ try {
     tab_rss_timeline_ms_mb: timeline,
     wasm_bytes: raw,
     wasm_gzip_bytes: gz,
+    ...(again ? { again } : {}),
   };
   console.log(JSON.stringify(result, null, 2));
   if (outFile) writeFileSync(outFile, JSON.stringify(result, null, 2));

@@ -73,6 +73,8 @@ export const CHROMIUM_FLAGS = [
   '--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
   '--disable-background-networking', '--disable-component-update', '--disable-sync',
   '--use-fake-device-for-media-stream', '--use-fake-ui-for-media-stream',
+  // Extra flags for measuring (e.g. SKYDOME_CHROMIUM_FLAGS='--js-flags=--no-liftoff'), split on spaces.
+  ...(process.env.SKYDOME_CHROMIUM_FLAGS || '').split(' ').filter(Boolean),
 ];
 
 /** A phone: Chromium with a fresh profile, 412 × 915 CSS px portrait (or `viewport`), touch,
