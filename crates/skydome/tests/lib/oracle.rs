@@ -731,7 +731,8 @@ pub fn curve_error(case: &Case, g: &[Vec<f64>; 3]) -> [f64; 4] {
 /// The calibrations tried while choosing the default's (see [`calibration_candidates`]):
 /// `SKYDOME_ORACLE_CANDIDATES`, `;`-separated, each a `,`-separated list of `key=value` on top
 /// of [`CalibrateOptions::noise_fit`] (keys `samples`, `cover`, `stratify`, `lo`, `hi`,
-/// `lambda`, `margin`, `bands`, `fit`, `patch`); `noise_fit` alone without the variable.
+/// `lambda`, `margin`, `bands`, `fit`, `patch`; `covering=1` starts again from
+/// [`CalibrateOptions::covering`], so put it first); `noise_fit` alone without the variable.
 fn candidates() -> Vec<(String, CalibrateOptions)> {
     let spec = std::env::var("SKYDOME_ORACLE_CANDIDATES").unwrap_or_default();
     let mut out = vec![("noise_fit".to_string(), CalibrateOptions::noise_fit())];
@@ -743,6 +744,7 @@ fn candidates() -> Vec<(String, CalibrateOptions)> {
             match k.trim() {
                 "samples" => o.sampling.samples = f as usize,
                 "cover" => o.sampling.cover = f as usize,
+                "covering" => o = CalibrateOptions::covering(),
                 "stratify" => o.sampling.stratify = f as usize,
                 "lo" => o.sampling.clip_low = f as u8,
                 "hi" => o.sampling.clip_high = f as u8,
@@ -767,7 +769,9 @@ fn candidates() -> Vec<(String, CalibrateOptions)> {
 /// 2–9); candidates from `SKYDOME_ORACLE_CANDIDATES` ([`candidates`]). With
 /// `SKYDOME_ORACLE_CHOOSE=r` each candidate's channel takes the default calibration's curve
 /// instead where that curve's [`toe_consistency`] on the candidate's samples is more than `r`
-/// times better (a data-driven choice; both values printed). A minute or two:
+/// times better (a data-driven choice; both values printed). With `SKYDOME_ORACLE_JOIN=z` every
+/// candidate's curve below code `z` is the default calibration's, shifted to meet it at `z` (a
+/// fallback toe; docs/accuracy.md, third round). A minute or two:
 /// `SKYDOME_ORACLE_CANDIDATES="cover=16,lo=1,lambda=150" cargo test --workspace --test lib --
 /// --ignored oracle::calibration_candidates --nocapture`.
 #[test]
@@ -852,6 +856,20 @@ fn calibration_candidates() {
                         println!("    ch {ch}: toe consistency on the candidate's samples: candidate {mc:.3} default {md:.3}; on the default's samples: candidate {mc2:.3} default {md2:.3}");
                         if md * ratio < mc {
                             *curve = grid.clone();
+                        }
+                    }
+                    cal.response = skydome::response::Response::from_curves(curves).unwrap();
+                }
+                let join: Option<usize> = std::env::var("SKYDOME_ORACLE_JOIN")
+                    .ok()
+                    .and_then(|v| v.trim().parse().ok());
+                if let Some(zj) = join.map(|z| z.min(255)) {
+                    let mut curves = cal.response.curves().clone();
+                    for (ch, curve) in curves.iter_mut().enumerate() {
+                        let grid = &def.response.curves()[ch];
+                        let shift = curve[zj] - grid[zj];
+                        for z in 0..zj {
+                            curve[z] = grid[z] + shift;
                         }
                     }
                     cal.response = skydome::response::Response::from_curves(curves).unwrap();
