@@ -3,7 +3,7 @@
 // preview, the tab's peak memory (renderer process resident set, sampled every 100 ms; the
 // worker runs in the same process), the wasm linear memory's high-water mark, and the native
 // CLI's time for the same frames and options (and its stage times). Also the gzipped .wasm size.
-//   node measure.mjs [--size 3464] [--evs -2,0,2] [--threads N] [--out results.json] [--again] [--idle MS]
+//   node measure.mjs [--size 3464] [--evs -2,0,2] [--threads N] [--out results.json] [--again] [--idle MS] [--reserve MiB]
 // --again merges the same photos a second time in the same page (`again` in the output).
 // --evs gives the frames' exposure values (`skydome synth --evs`): -4,-3,-2,-1,0,1,2,3,4 is a
 // phone's 9-frame bracket.
@@ -32,6 +32,9 @@ const outFile = arg('--out', null);
 const threads = arg('--threads', null);
 const evs = arg('--evs', '-2,0,2');
 const memory = arg('--memory', null);
+// --reserve MiB loads the page with ?reserve=MiB: the memory the core reserves while idle for
+// the first merge (the app's default: 160 MiB; 0: none, as before this existed).
+const reserve = arg('--reserve', null);
 // --idle MS: how long the app sits loaded before the photos are picked (default 1000 ms).
 const idleMs = Number(arg('--idle', '1000'));
 
@@ -109,6 +112,7 @@ try {
   const query = new URLSearchParams();
   if (threads != null) query.set('threads', threads);
   if (memory != null) query.set('memory', memory);
+  if (reserve != null) query.set('reserve', reserve);
   await p.page.goto(`${server.origin}/${query.size ? `?${query}` : ''}`);
   await onScreen(p.page, 'camera');
   await p.page.waitForFunction(() => document.body.dataset.core);

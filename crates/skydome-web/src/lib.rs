@@ -980,6 +980,40 @@ pub fn warm_up(size: usize) -> Result<(), WebError> {
     Ok(())
 }
 
+/// Grows the core's heap by `bytes` (rounded up to whole pages), writes to every 4 KiB page of
+/// it, and frees it again; returns the bytes so reserved (0 when the browser would not grant
+/// them, which is not an error: a merge then grows the memory itself, as before).
+///
+/// Why: a WebAssembly memory only grows, page by page as the allocator asks, and the operating
+/// system backs each new 4 KiB page on its first write. For a phone's 3 × 12 MP bracket the
+/// core's memory grows from about 12 MiB to 185 MiB during the first merge, and on this project's
+/// 2-core test machine growing and first-touching it took about 0.3 s of that merge's 1.3–1.5 s
+/// (the second merge in the same page, whose memory is already there, 0.85–1.0 s; measured with
+/// `web-tests/measure.mjs --again`). The allocator keeps what is freed here and hands it to the
+/// next merge, so the worker calls this once after [`warm_up`], while the app waits for the
+/// user, and the first merge starts on memory that is already there. The memory is not given
+/// back (a WebAssembly memory never shrinks), which a merge of that size would have caused
+/// anyway; a bracket smaller than the reservation runs within it and does not raise the tab's
+/// peak.
+pub fn reserve_heap(bytes: usize) -> usize {
+    /// The page size the operating system backs memory with (the smallest, 4 KiB).
+    const OS_PAGE: usize = 4096;
+    let mut block: Vec<u8> = Vec::new();
+    if block.try_reserve_exact(bytes).is_err() {
+        return 0;
+    }
+    for page in block.spare_capacity_mut().chunks_mut(OS_PAGE) {
+        page[0].write(0);
+    }
+    block.capacity()
+}
+
+/// [`reserve_heap`] for the page, in MiB.
+#[wasm_bindgen(js_name = reserve_heap)]
+pub fn reserve_heap_js(mib: usize) -> usize {
+    reserve_heap(mib.saturating_mul(1 << 20))
+}
+
 /// [`warm_up`] for the page: call once after loading (a 256² bracket takes about 0.1 s).
 #[wasm_bindgen(js_name = warm_up)]
 pub fn warm_up_js(size: usize) -> Result<(), JsError> {

@@ -174,6 +174,14 @@ fn warm_up_runs_the_pipeline_on_a_small_synthetic_bracket() {
     assert!(skydome_web::warm_up(8).is_err(), "too small for a bracket");
 }
 
+/// The idle reservation returns what it reserved, and 0 (no panic, no abort) for what no
+/// memory can hold.
+#[test]
+fn reserve_heap_reserves_or_declines() {
+    assert!(skydome_web::reserve_heap(3 << 20) >= 3 << 20);
+    assert_eq!(skydome_web::reserve_heap(usize::MAX), 0);
+}
+
 /// The overlay picture made on request after a run that did not make it is the run's own.
 #[test]
 fn overlay_on_request_is_the_runs_overlay() {

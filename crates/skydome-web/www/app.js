@@ -89,11 +89,15 @@ const threadsAsked = new URLSearchParams(location.search).get('threads');
 // `?memory=MiB` sets the budget for a bracket's photos decoded at once (the worker's default:
 // 256 MiB; above it the core reads them one at a time).
 const memoryAsked = new URLSearchParams(location.search).get('memory');
+// `?reserve=MiB` sets how much memory the core reserves while idle for the first merge (the
+// worker's default: 160 MiB; 0: none).
+const reserveAsked = new URLSearchParams(location.search).get('reserve');
 
 function startWorker() {
   const url = new URL('./worker.js', import.meta.url);
   if (threadsAsked != null) url.searchParams.set('threads', threadsAsked);
   if (memoryAsked != null) url.searchParams.set('memory', memoryAsked);
+  if (reserveAsked != null) url.searchParams.set('reserve', reserveAsked);
   worker = new Worker(url, { type: 'module' });
   worker.onmessage = (e) => {
     const { id, progress, result, error, kind } = e.data;

@@ -12,7 +12,7 @@
 // sets the pool's size; 0 forces the single-threaded build.
 
 let Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
-  list_times, decoding_progress, sentence, warm_up;
+  list_times, decoding_progress, sentence, warm_up, reserve_heap;
 /** Which core runs: {build: 'threaded' | 'single', threads, reason} (reason: why single). */
 let coreInfo = null;
 
@@ -64,20 +64,32 @@ let memoryRef = null;
 const ready = loadCore().then(({ m, wasm, info }) => {
   ({
     Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
-    list_times, decoding_progress, sentence, warm_up,
+    list_times, decoding_progress, sentence, warm_up, reserve_heap,
   } = m);
   coreInfo = info;
   memoryRef = wasm.memory || null;
   return wasm;
 });
 // Once loaded, the core merges a tiny synthetic bracket (about 0.1 s) so the browser compiles
-// its loops into optimised code before the user's first merge (see skydome_web::warm_up);
-// skipped when a merge came first.
+// its loops into optimised code before the user's first merge (see skydome_web::warm_up), then
+// grows its memory to what a phone's 3 × 12 MP bracket needs and frees it again, so the first
+// merge does not wait for the memory to grow (skydome_web::reserve_heap: about 0.3 s of a
+// 1.3–1.5 s first merge on the test machine). Both skipped when a merge came first.
+// `?reserve=MiB` on this worker's URL (from the page's own) sets the reservation; 0, none.
+// 160 MiB: the core's memory after loading (about 12 MiB) plus this stays below the 185 MiB a
+// 3 × 12 MP merge reaches, so such a merge, or any smaller one, does not raise the tab's peak.
+const reserveParam = new URL(self.location.href).searchParams.get('reserve');
+const reserveMiB = reserveParam != null && reserveParam !== '' && Number.isFinite(Number(reserveParam))
+  ? Math.max(0, Math.floor(Number(reserveParam))) : 160;
 let merged = false;
 ready.then(() => setTimeout(() => {
   startHelpers();
   if (merged) return;
   try { warm_up(256); } catch (err) { console.warn(`warm-up: ${messageOf(err)}`); }
+  setTimeout(() => {
+    if (merged || reserveMiB === 0) return;
+    if (reserve_heap(reserveMiB) === 0) console.warn(`could not reserve ${reserveMiB} MiB for the first merge`);
+  }, 0);
 }, 0)).catch(() => {}); // a core that fails to load is reported by the first request
 let photos = null;   // the photos of the current bracket as files (kept for a second run, e.g. a tapped sun)
 let job = null;      // the bracket handed to the core
