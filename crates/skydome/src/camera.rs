@@ -274,6 +274,27 @@ impl CameraProfile {
         Some(est)
     }
 
+    /// [`noise_estimate`](Self::noise_estimate) for a bracket shot at ISO speed `iso`: a model
+    /// measured at the profile's [`iso`](Self::iso) has its electrons at code 128 scaled by
+    /// `profile ISO / iso` (a higher ISO is a higher gain: the same code holds proportionally
+    /// fewer electrons, so its shot noise is larger), with read noise (electrons) and JPEG code
+    /// noise (codes) kept, and [`NoiseEstimate::scaled_from_iso`] set. Unscaled when either ISO
+    /// is unknown, not a positive number, or the two are equal.
+    pub fn noise_estimate_at_iso(&self, iso: Option<f64>) -> Option<NoiseEstimate> {
+        let mut est = self.noise_estimate()?;
+        let (Some(from), Some(to)) = (self.iso, iso) else {
+            return Some(est);
+        };
+        let valid = |v: f64| v.is_finite() && v > 0.0;
+        if valid(from) && valid(to) && from != to {
+            for c in &mut est.model.channels {
+                c.electrons_at_gauge *= from / to;
+            }
+            est.scaled_from_iso = Some(from);
+        }
+        Some(est)
+    }
+
     /// The response this profile describes (validated).
     pub fn response(&self) -> Result<Response, ResponseError> {
         if self.linear {

@@ -216,6 +216,11 @@ pub struct NoiseEstimate {
     /// Which parameters are the prior's.
     #[serde(default)]
     pub from_prior: FromPrior,
+    /// The ISO speed the model was measured at, when it was a camera profile's measured at
+    /// another ISO than the bracket's and its gains were scaled to the bracket's
+    /// ([`crate::camera::CameraProfile::noise_estimate_at_iso`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scaled_from_iso: Option<f64>,
 }
 
 fn unit_wb() -> [f64; 3] {
@@ -233,6 +238,7 @@ impl NoiseEstimate {
             fitted: true,
             white_balance: model.channels.map(|c| c.electrons_at_gauge / g),
             from_prior: FromPrior::default(),
+            scaled_from_iso: None,
         }
     }
 
@@ -259,6 +265,7 @@ pub fn estimate(
         fitted: false,
         white_balance: [1.0; 3],
         from_prior: FromPrior::ALL,
+        scaled_from_iso: None,
     };
     let Some(first) = frames.first() else {
         return fallback(0, 0);
@@ -409,6 +416,7 @@ pub fn estimate(
         fitted: !from_prior.any(),
         white_balance: wb,
         from_prior,
+        scaled_from_iso: None,
     }
 }
 

@@ -581,9 +581,10 @@ fn merge_stage(
     progress: &mut Reporter<'_>,
 ) -> Result<MergeOutcome, PipelineError> {
     progress.at(Stage::Merging, 0.0)?;
-    // A profile's noise model (with what in it came from the prior) stands in for a fit.
+    // A profile's noise model (with what in it came from the prior) stands in for a fit,
+    // scaled to the bracket's ISO when the profile was measured at another.
     let profile_estimate = match &options.response {
-        ResponseSource::Profile(prof) => prof.noise_estimate(),
+        ResponseSource::Profile(prof) => prof.noise_estimate_at_iso(bracket_iso(&br.frames)),
         ResponseSource::Calibrate(_) => None,
     };
     let profile_noise = profile_estimate.map(|n| n.model);
@@ -671,6 +672,16 @@ fn merge_stage(
         raw: None,
         at_ceiling,
     })
+}
+
+/// The bracket's ISO speed: the frames' one ISO, when every frame states the same (a bracket
+/// that varies ISO is warned about in the bracket checks and gets no single value).
+fn bracket_iso(frames: &[bracket::Frame]) -> Option<f64> {
+    let first = frames.first()?.exposure.iso?;
+    frames
+        .iter()
+        .all(|f| f.exposure.iso == Some(first))
+        .then_some(first)
 }
 
 /// The part of the photos (input pixels, origin top-left) that [`run`] merges when the dome is
