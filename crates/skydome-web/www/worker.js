@@ -77,7 +77,8 @@ const ready = loadCore().then(({ m, wasm, info }) => {
 // 1.3–1.5 s first merge on the test machine). Both skipped when a merge came first.
 // `?reserve=MiB` on this worker's URL (from the page's own) sets the reservation; 0, none.
 // 160 MiB: the core's memory after loading (about 12 MiB) plus this stays below the 185 MiB a
-// 3 × 12 MP merge reaches, so such a merge, or any smaller one, does not raise the tab's peak.
+// 3 × 12 MP merge reaches, so such a merge's tab peak is not raised (the tab holds it from then
+// on, as after any such merge).
 const reserveParam = new URL(self.location.href).searchParams.get('reserve');
 const reserveMiB = reserveParam != null && reserveParam !== '' && Number.isFinite(Number(reserveParam))
   ? Math.max(0, Math.floor(Number(reserveParam))) : 160;
