@@ -53,7 +53,11 @@ pub extern "C" fn hash(high: u32) -> u32 {
         let h = out.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &b| {
             (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
         });
-        if high != 0 { (h >> 32) as u32 } else { h as u32 }
+        if high != 0 {
+            (h >> 32) as u32
+        } else {
+            h as u32
+        }
     })
 }
 
