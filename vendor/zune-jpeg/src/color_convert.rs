@@ -61,6 +61,8 @@ mod neon64;
 mod scalar;
 // skydome patch: WebAssembly SIMD versions (see PATCHED.md).
 mod wasm;
+#[cfg(all(target_arch = "wasm32", target_feature = "simd128"))]
+pub(crate) use wasm::ycbcr_to_rgb_row_wasm;
 
 #[allow(unused_variables)]
 pub fn choose_ycbcr_to_rgb_convert_func(

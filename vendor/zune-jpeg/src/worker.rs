@@ -330,21 +330,21 @@ fn color_convert_ycbcr(
             continue;
         }
 
-        // Chunk in outputs of 16 to pass to color_convert as an array of 16 i16's.
-        for (((y, cb), cr), out_c) in y_width
-            .chunks_exact(16)
-            .zip(cb_width.chunks_exact(16))
-            .zip(cr_width.chunks_exact(16))
-            .zip(out.chunks_exact_mut(16 * num_components))
-        {
-            (color_convert_16)(
-                y.try_into().unwrap(),
-                cb.try_into().unwrap(),
-                cr.try_into().unwrap(),
-                out_c,
-                &mut 0
-            );
+        // skydome patch (see PATCHED.md): on wasm simd128 the RGB and RGBA conversions
+        // (`color_convert_16` is then `ycbcr_to_rgb(a)_wasm`, see `choose_ycbcr_to_rgb_convert_func`)
+        // go a row at a time, the same groups of 16 as the loop below.
+        #[cfg(all(target_arch = "wasm32", target_feature = "simd128"))]
+        match output_colorspace {
+            ColorSpace::RGB => {
+                crate::color_convert::ycbcr_to_rgb_row_wasm::<false>(y_width, cb_width, cr_width, out)
+            }
+            ColorSpace::RGBA => {
+                crate::color_convert::ycbcr_to_rgb_row_wasm::<true>(y_width, cb_width, cr_width, out)
+            }
+            _ => color_convert_16_row(y_width, cb_width, cr_width, out, num_components, color_convert_16)
         }
+        #[cfg(not(all(target_arch = "wasm32", target_feature = "simd128")))]
+        color_convert_16_row(y_width, cb_width, cr_width, out, num_components, color_convert_16);
         //we have more pixels in the end that can't be handled by the main loop.
         //move pointer back a little bit to get last 16 bytes,
         //color convert, and overwrite
@@ -372,6 +372,31 @@ fn color_convert_ycbcr(
         rem.copy_from_slice(&temp[0..rem.len()]);
     }
 }
+
+/// One row's whole groups of 16 pixels through `color_convert_16` (zune-jpeg's loop, moved
+/// into a function of its own by the skydome patch, see PATCHED.md).
+#[inline(always)]
+fn color_convert_16_row(
+    y_width: &[i16], cb_width: &[i16], cr_width: &[i16], out: &mut [u8], num_components: usize,
+    color_convert_16: ColorConvert16Ptr
+) {
+    // Chunk in outputs of 16 to pass to color_convert as an array of 16 i16's.
+    for (((y, cb), cr), out_c) in y_width
+        .chunks_exact(16)
+        .zip(cb_width.chunks_exact(16))
+        .zip(cr_width.chunks_exact(16))
+        .zip(out.chunks_exact_mut(16 * num_components))
+    {
+        (color_convert_16)(
+            y.try_into().unwrap(),
+            cb.try_into().unwrap(),
+            cr.try_into().unwrap(),
+            out_c,
+            &mut 0
+        );
+    }
+}
+
 pub(crate) fn upsample(
     component: &mut Components, mcu_height: usize, i: usize, upsampler_scratch_space: &mut [i16],
     has_vertical_sample: bool
