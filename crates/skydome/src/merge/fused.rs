@@ -190,7 +190,7 @@ mod avx2 {
             let count = ((n - s0) / 8).min(BLOCK);
             // `s0` and `n` are multiples of STEP: vectors come in threes, and the third of a
             // step (its lanes' channels) is a constant in each call of `hat_stage`.
-            debug_assert!(s0 % STEP == 0 && count % 3 == 0);
+            debug_assert!(s0.is_multiple_of(STEP) && count.is_multiple_of(3));
             let mut v = 0;
             while v < count {
                 let s = s0 + 8 * v;
