@@ -12,7 +12,8 @@
 //! Run: `cargo bench -p skydome --bench noise_cost` (`SKYDOME_COST_CALLS`, default 9;
 //! `SKYDOME_COST_CASES`, e.g. `6:3,12:3`, default all six; `SKYDOME_COST_ONLY`, one of `hat`,
 //! `given`, `fit`, `with-fit`, calls only that one, e.g. to count its instructions with
-//! `valgrind --tool=callgrind` — the others' columns then read 0).
+//! `valgrind --tool=callgrind` — the others' columns then read 0). A size other than 6 or 12 MP
+//! is a square of about that many pixels: `SKYDOME_COST_CASES=1:3` is 1000² at 3 frames.
 
 use skydome::bracket::Frame;
 use skydome::merge::{merge, merge_into, MergeOptions, Weighting};
@@ -83,7 +84,13 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|");
     for (mp, p) in cases {
-        let side = if mp >= 12 { 3464 } else { 2448 };
+        // 6 and 12 MP as documented; any other size (e.g. 1, for counting instructions under
+        // valgrind, where generating 6 MP takes minutes) as a square of about that many pixels.
+        let side = match mp {
+            12 => 3464,
+            6 => 2448,
+            m => ((m as f64 * 1e6).sqrt() as usize).max(8) / 8 * 8,
+        };
         let (frames, r) = bracket(side, p);
         let hat = MergeOptions::default();
         let fit = MergeOptions {
