@@ -47,11 +47,13 @@ async function loadCore() {
 // 256 MiB is read one photo at a time (the same bytes, at about 1.6× the core's time; a 3 × 12 MP
 // bracket, 108 MB, is decoded whole, the fast way). `?memory=MiB` on this worker's URL (from the
 // page's own) sets it; `?memory=none`, no limit.
-const memoryParam = new URL(self.location.href).searchParams.get('memory');
-const frameBudget = memoryParam === 'none' ? null
-  : memoryParam != null && memoryParam !== '' && Number.isFinite(Number(memoryParam))
-    ? Math.max(0, Math.floor(Number(memoryParam))) * 2 ** 20
-    : 256 * 2 ** 20;
+/** This worker's `?name=MiB` as whole MiB (≥ 0), or `dflt` when absent or not a number. */
+function mibParam(name, dflt) {
+  const v = new URL(self.location.href).searchParams.get(name);
+  return v != null && v !== '' && Number.isFinite(Number(v)) ? Math.max(0, Math.floor(Number(v))) : dflt;
+}
+const frameBudget = new URL(self.location.href).searchParams.get('memory') === 'none' ? null
+  : mibParam('memory', 256) * 2 ** 20;
 
 /** `optionsJson` with the frame memory budget set (unless the page set one). */
 function withBudget(optionsJson) {
@@ -79,9 +81,7 @@ const ready = loadCore().then(({ m, wasm, info }) => {
 // 160 MiB: the core's memory after loading (about 12 MiB) plus this stays below the 185 MiB a
 // 3 × 12 MP merge reaches, so such a merge's tab peak is not raised (the tab holds it from then
 // on, as after any such merge).
-const reserveParam = new URL(self.location.href).searchParams.get('reserve');
-const reserveMiB = reserveParam != null && reserveParam !== '' && Number.isFinite(Number(reserveParam))
-  ? Math.max(0, Math.floor(Number(reserveParam))) : 160;
+const reserveMiB = mibParam('reserve', 160);
 let merged = false;
 ready.then(() => setTimeout(() => {
   startHelpers();
