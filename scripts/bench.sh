@@ -24,7 +24,7 @@
 # measured cost per capture (ideal scaling: shards share nothing but the output folder).
 #
 # --noise: `skydome merge --weighting noise` against `--weighting hat` (the default), the same
-# bracket and options otherwise, alternating, $RUNS runs each, on 3 × 6 MP and 3 × 12 MP synthetic
+# bracket and options otherwise, alternating, $RUNS runs each, on 3, 5 and 9 frames (2 EV apart) of 6 MP and 12 MP synthetic
 # brackets: median wall and CPU time of each whole process, their ratio, and the difference — the
 # noise merge's own cost (its noise-model fit and its refinement of the hat's estimate), since
 # everything else (decoding, calibration, writing) is the same work. The merge stage alone, with
@@ -100,14 +100,21 @@ timed() {
 if [ "$NOISE" = 1 ]; then
   rm -f "$WORK"/noise_*.txt
   for size in 2448 3464; do
-    d="$WORK/bracket_${size}_3"
-    synth "$size" "-2,0,2" "$d"
-    echo "3 × ${size}²: $RUNS alternating runs of --weighting hat and --weighting noise…" >&2
-    for i in $(seq "$RUNS"); do
-      for wt in hat noise; do
-        # shellcheck disable=SC2046
-        timed "noise_${size}_$wt" "$SKYDOME" merge $(frames_of "$d") --times "$(times_of "$d")" \
-          --weighting "$wt" -o "$WORK/n.hdr" --force --quiet
+    for nf in 3 5 9; do
+      case "$nf" in
+        3) evs="-2,0,2" ;;
+        5) evs="-4,-2,0,2,4" ;;
+        9) evs="-8,-6,-4,-2,0,2,4,6,8" ;;
+      esac
+      if [ "$nf" = 3 ]; then d="$WORK/bracket_${size}_3"; else d="$WORK/bracket_${size}_${nf}x2ev"; fi
+      synth "$size" "$evs" "$d"
+      echo "$nf × ${size}²: $RUNS alternating runs of --weighting hat and --weighting noise…" >&2
+      for i in $(seq "$RUNS"); do
+        for wt in hat noise; do
+          # shellcheck disable=SC2046
+          timed "noise_${size}_${nf}_$wt" "$SKYDOME" merge $(frames_of "$d") --times "$(times_of "$d")" \
+            --weighting "$wt" -o "$WORK/n.hdr" --force --quiet
+        done
       done
     done
   done
@@ -119,11 +126,12 @@ def med(name, col):
     if col == "cpu":
         return statistics.median(r[2] + r[3] for r in rows), len(rows)
     return statistics.median(r[0] for r in rows), len(rows)
-print(f"{'skydome merge, 3 frames':24} {'':5} {'hat':>9} {'noise':>9} {'noise/hat':>10} {'noise−hat':>10}")
+print(f"{'skydome merge':24} {'':5} {'hat':>9} {'noise':>9} {'noise/hat':>10} {'noise−hat':>10}")
 for size, mp in [(2448, "6 MP"), (3464, "12 MP")]:
-    for col in ("wall", "cpu"):
-        (h, n), (s, _) = med(f"noise_{size}_hat", col), med(f"noise_{size}_noise", col)
-        print(f"{'3 × ' + mp:24} {col:5} {h:8.3f}s {s:8.3f}s {s / h:10.3f} {1000 * (s - h):8.0f}ms")
+    for nf in (3, 5, 9):
+        for col in ("wall", "cpu"):
+            (h, n), (s, _) = med(f"noise_{size}_{nf}_hat", col), med(f"noise_{size}_{nf}_noise", col)
+            print(f"{f'{nf} × ' + mp:24} {col:5} {h:8.3f}s {s:8.3f}s {s / h:10.3f} {1000 * (s - h):8.0f}ms")
 print(f"medians of {n} alternating runs each, whole processes (CPU = user + system, all threads)")
 PY
   exit 0

@@ -89,11 +89,11 @@ pub struct PipelineArgs {
     /// `none` (relative).
     #[arg(long, default_value = "profile", value_parser = parse_absolute)]
     pub absolute: AbsoluteMode,
-    /// Frame weighting: `hat` (robust, default), `noise` (inverse variance under a camera noise
-    /// model estimated from the bracket or read from the profile: 1.04–1.26× the oracle's error
-    /// where the hat is 1.37–2.45×, at about 5× the hat's merge time) or `none` (the seed's
-    /// unweighted eq. 4).
-    #[arg(long, default_value = "hat", value_parser = parse_weighting)]
+    /// Frame weighting: `noise` (default: inverse variance under a camera noise model fitted
+    /// to the bracket or read from the profile; 1.04–1.26× the oracle's error where the hat's
+    /// is 1.37–2.45×, at 1.1–1.25× the hat's run time), `hat` (Debevec's hat, the earlier default)
+    /// or `none` (the seed's unweighted eq. 4).
+    #[arg(long, default_value = "noise", value_parser = parse_weighting)]
     pub weighting: Weighting,
     /// Which exposures calibrate and merge: `listed` (EXIF, --times or --times-file, as given;
     /// default), checked against the photos, with a warning naming every frame more than 1/3
@@ -121,7 +121,7 @@ pub struct PipelineArgs {
     pub ghosts: bool,
     /// The most memory, in MiB, one bracket's photos may take decoded at once: a bracket above
     /// it (frames × width × height × 3 bytes) is read one photo at a time when the job is a
-    /// plain crop to the dome (--fisheye --crop; no --align, --ghosts, --weighting noise,
+    /// plain crop to the dome (--fisheye --crop; no --align, --ghosts,
     /// tilt, meter reading or EXIF scale), the same bytes for about 1.6× the CPU time. For
     /// small machines and batch nodes; default: no limit (every photo decoded whole).
     #[arg(long, value_name = "MiB")]

@@ -341,7 +341,8 @@ pub fn meta_dict<'py>(py: Python<'py>, meta: &HdrMeta) -> PyResult<Bound<'py, Py
 ///     radius_px (default 3) around pixel (x, y) of the input photos; makes the radiance
 ///     absolute.
 /// weighting
-///     Frame weighting of the merge: "hat" (default), "noise" or "none".
+///     Frame weighting of the merge: "noise" (default: inverse variance under a noise model
+///     fitted to the bracket or read from the profile), "hat" (Debevec's hat) or "none".
 /// exposures
 ///     "listed" (default): the given or EXIF times as they are; "measured": the exposures
 ///     measured from the photos, anchored on the listed time of the frame that agrees best
@@ -366,11 +367,11 @@ pub fn meta_dict<'py>(py: Python<'py>, meta: &HdrMeta) -> PyResult<Bound<'py, Py
 #[pyfunction]
 #[pyo3(signature = (frames, times=None, *, profile=None, lens=None, fisheye=false,
     lens_model=None, fov=None, crop=false, sun=None, north=None, time=None, lat=None, lon=None,
-    illuminance=None, luminance=None, weighting="hat", exposures="listed", preview=false,
+    illuminance=None, luminance=None, weighting="noise", exposures="listed", preview=false,
     equirect=None, progress=None, circle=None),
     text_signature = "(frames, times=None, *, profile=None, lens=None, fisheye=False, \
     lens_model=None, fov=None, crop=False, sun='auto', north=None, time=None, lat=None, \
-    lon=None, illuminance=None, luminance=None, weighting='hat', exposures='listed', \
+    lon=None, illuminance=None, luminance=None, weighting='noise', exposures='listed', \
     preview=False, equirect=None, progress=None, circle=None)")]
 #[allow(clippy::too_many_arguments)]
 pub fn run<'py>(

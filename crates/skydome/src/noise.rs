@@ -248,6 +248,26 @@ impl NoiseEstimate {
     }
 }
 
+/// The pixels [`estimate`] reads are every `sample_stride(np)`-th of a frame of `np` pixels
+/// (row-major, from the first): at most about 250 000.
+pub fn sample_stride(np: usize) -> usize {
+    (np / 250_000).max(1)
+}
+
+/// The 8-bit RGB pixels of a frame (`3 · np` samples) that [`estimate`] reads, in order: a
+/// frame read one photo at a time keeps only these (a twentieth of a 6 MP photo), and
+/// [`estimate`] on such frames (`width` the count, `height` 1) reads exactly them, so it gives
+/// the model of the whole frames.
+pub fn sampled_pixels(px: &[u8]) -> Vec<u8> {
+    let np = px.len() / 3;
+    let stride = sample_stride(np);
+    px.chunks_exact(3)
+        .step_by(stride)
+        .flatten()
+        .copied()
+        .collect()
+}
+
 /// Estimates the noise model from adjacent-frame differences (see the module docs). `frames`
 /// sorted shortest first; codes below `black + 6` or above 245 (8-bit scale) are not used;
 /// `mask`, when given, selects the pixels (row-major) that may be used. At most about 250 000
@@ -277,7 +297,7 @@ pub fn estimate(
     {
         return fallback(0, 0);
     }
-    let stride = (np / 250_000).max(1);
+    let stride = sample_stride(np);
     let lo = (black as usize + 6).max(6);
     let hi = 245usize;
     if lo >= hi {
@@ -684,6 +704,45 @@ mod tests {
         let (x, _) = fit_nonneg_n(&rows).unwrap();
         for k in 0..5 {
             assert!((x[k] - truth[k]).abs() < 1e-9 * (1.0 + truth[k]), "{x:?}");
+        }
+    }
+
+    /// [`estimate`] on the pixels [`sampled_pixels`] keeps of each frame gives the whole
+    /// frames' estimate exactly (the streamed intake keeps only these), for frames read every
+    /// pixel (below 500 000 pixels) and every second and third.
+    #[test]
+    fn the_sampled_pixels_give_the_whole_frames_estimate() {
+        use crate::bracket::{assemble, DecodedFrame, OrientationPolicy, Pixels};
+        for (w, h) in [(300, 200), (820, 700), (1000, 760)] {
+            let b = crate::synth::generate(&crate::synth::SynthOptions {
+                width: w,
+                height: h,
+                ..Default::default()
+            })
+            .expect("synth");
+            let frames = b.frames.into_iter().map(DecodedFrame::from).collect();
+            let br = assemble(frames, None, OrientationPolicy::Apply).expect("bracket");
+            let response = Response::linear();
+            let whole = estimate(&br.frames, &response, 0, None);
+            let kept: Vec<Frame> = br
+                .frames
+                .iter()
+                .map(|f| {
+                    let Pixels::U8(v) = &f.pixels else {
+                        panic!("8-bit frames")
+                    };
+                    let px = sampled_pixels(v);
+                    Frame {
+                        width: px.len() / 3,
+                        height: 1,
+                        pixels: Pixels::U8(px),
+                        ..f.clone()
+                    }
+                })
+                .collect();
+            assert_eq!(kept[0].width, (w * h).div_ceil(sample_stride(w * h)));
+            assert!(whole.differences > 1000, "{whole:?}");
+            assert_eq!(estimate(&kept, &response, 0, None), whole, "{w} × {h}");
         }
     }
 

@@ -116,7 +116,7 @@ def run(
     lon: Optional[float] = None,
     illuminance: Optional[float] = None,
     luminance: Union[Tuple[float, float, float], Tuple[float, float, float, float], None] = None,
-    weighting: Literal["hat", "noise", "none"] = "hat",
+    weighting: Literal["hat", "noise", "none"] = "noise",
     exposures: Literal["listed", "measured"] = "listed",
     preview: bool = False,
     equirect: Union[bool, int, None] = None,

@@ -17,7 +17,7 @@
 //!   specular highlight clipped in the longer frames is averaged with their too-low votes and
 //!   comes out several stops too dark ("dark suns"); noisy, quantised near-black codes pull
 //!   the shadows the same way. On the synthetic fish-eye bracket it triples the log error.
-//! - [`Weighting::Hat`] (default) — Debevec's hat `w(z) = min(z, 255 − z)`, **zero** at 0 and
+//! - [`Weighting::Hat`] — Debevec's hat `w(z) = min(z, 255 − z)`, **zero** at 0 and
 //!   255 so clipped codes never vote (OpenCV's `MergeDebevec` adds 1 to its triangle, which
 //!   lets clipped pixels in: opencv#24966). Two changes make clipping safe: the *shortest*
 //!   frame keeps the full weight (127) for every code above mid-grey and the *longest* for every
@@ -26,8 +26,8 @@
 //!   pixel is *flagged* ([`Merged::clipped`]). The shortest frame also carries a 1e-6 floor
 //!   weight, so the denominator is never zero even for impossible (non-monotonic) inputs.
 //!
-//! - [`Weighting::Noise`] — inverse variance under the camera noise model, see the
-//!   variant's documentation and [`crate::noise`].
+//! - [`Weighting::Noise`] (default) — inverse variance under the camera noise model, refining
+//!   the hat's estimate; see the variant's documentation and [`crate::noise`].
 //!
 //! ## 16-bit input
 //! Merged through a 65 536-entry table per frame and channel (1.5 MB per frame): `g` is
@@ -106,23 +106,22 @@ pub enum Weighting {
     /// Clipped values pull the mean down ("dark suns"); kept for reproducing the seed.
     None,
     /// Debevec's hat, zero at 0 and 255, with full weight for the shortest frame above
-    /// mid-grey and for the longest below it (the default).
-    #[default]
+    /// mid-grey and for the longest below it (the default before issue 27; also the noise
+    /// merge's first estimate).
     Hat,
     /// Inverse variance of each vote under a camera noise model (shot, read, quantisation and
     /// JPEG noise; see [`crate::noise`]), evaluated at the code the frame is *expected* to read
     /// given the hat's first estimate (two passes, as Granados et al. 2010): a longer exposure,
     /// which collected more light, counts for more. Zero at the black level and 255, fading to
-    /// zero over the top codes; a frame expected within 5 codes of clipping gets no weight. On
-    /// phone-like brackets about 30 % less error than the hat on the sky, at about 1.6× the
-    /// hat's merge time with the noise model given (a camera profile's) and 1.8× with its fit
-    /// from the frames (6 MP, 3 frames, CPU time on 2 cores, the AVX2 kernel; each row is
-    /// refined right after the hat has merged it, from one weight row per 1/32-stop bin of the
-    /// hat's estimate). On the
-    /// synthetic brackets of `tests/lib/oracle.rs` its error is 1.04–1.26× the oracle's (true
-    /// curve and true noise) where the hat's is 1.37–2.45×. Not the default yet: its cost is
-    /// above the 1.3× of the hat that issue 27 allows, and the noise fit reaches a bound on
-    /// every real set (white balance), so it runs on priors there.
+    /// zero over the top codes; a frame expected within 5 codes of clipping gets no weight. The
+    /// default (issue 27). On the synthetic brackets of `tests/lib/oracle.rs` its error is
+    /// 1.04–1.26× the oracle's (true curve and true noise) where the hat's is 1.37–2.45×, and
+    /// never worse than the hat's on any bracket's sky, dim ground or clipped sun; on every real
+    /// set its median frame agrees better with the merge than the hat's. A whole `skydome merge`
+    /// costs 1.10–1.25× the hat's (3–9 frames, 6 and 12 MP, `scripts/bench.sh --noise`), the
+    /// model fitted from the frames (each row is refined right after the hat has merged it, from
+    /// one weight row per 1/32-stop bin of the hat's estimate).
+    #[default]
     Noise,
 }
 
@@ -167,7 +166,7 @@ pub enum MergeError {
 /// Merge options.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct MergeOptions {
-    /// Frame weighting (default [`Weighting::Hat`]).
+    /// Frame weighting (default [`Weighting::Noise`]).
     pub weighting: Weighting,
     /// Also return a per-pixel confidence.
     pub confidence: bool,

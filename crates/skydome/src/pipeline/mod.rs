@@ -587,7 +587,26 @@ fn merge_stage(
         ResponseSource::Profile(prof) => prof.noise_estimate_at_iso(bracket_iso(&br.frames)),
         ResponseSource::Calibrate(_) => None,
     };
-    let profile_noise = profile_estimate.map(|n| n.model);
+    // Without one, the noise-aware merge's model is fitted here, on the whole frames (or the
+    // pixels of them that the streamed intake kept for it, which give the same fit): a merge of
+    // the dome's window alone then weighs every pixel as the whole photo's merge would.
+    let fitted_estimate = match (profile_estimate, options.weighting, &prepared) {
+        (None, merge::Weighting::Noise, Some(p)) => Some(noise::estimate(
+            &p.noise_samples,
+            response,
+            options.black_level,
+            None,
+        )),
+        (None, merge::Weighting::Noise, None) => Some(noise::estimate(
+            &br.frames,
+            response,
+            options.black_level,
+            None,
+        )),
+        _ => None,
+    };
+    let known_estimate = profile_estimate.or(fitted_estimate);
+    let profile_noise = known_estimate.map(|n| n.model);
     // The standard error needs a noise model; the frames are given back during the merge.
     let error_noise = options.products.confidence.then(|| match profile_noise {
         Some(n) => n,
@@ -636,8 +655,9 @@ fn merge_stage(
         )?,
     };
     progress.at(Stage::Merging, 1.0)?;
-    // The merge reports a given model as fitted; the profile says what was the prior's.
-    if let (Some(n), Some(p)) = (merged.noise.as_mut(), profile_estimate) {
+    // The merge reports a given model as fitted; the profile or the fit says what was the
+    // prior's.
+    if let (Some(n), Some(p)) = (merged.noise.as_mut(), known_estimate) {
         if n.model == p.model {
             *n = p;
         }
@@ -698,8 +718,9 @@ struct Window {
 /// The [`Window`] to merge, when a plain crop to the dome is the only reader of the merged
 /// pixels: nothing reads the photo beyond the crop's square (no level dome, vignetting, reading,
 /// absolute scale or north from the sun, all of which work on the whole photo before the crop),
-/// and no per-pixel product of the whole photo is asked for (confidence, consistency, the
-/// noise-aware merge, whose noise fit reads the whole bracket). `whole` is true for a RAW
+/// and no per-pixel product of the whole photo is asked for (confidence, consistency). The
+/// noise-aware merge's fit reads the whole bracket, so [`merge_stage`] makes it before the
+/// window's merge. `whole` is true for a RAW
 /// bracket or an absolute scale without a reading (merged whole). The merged pixels are the
 /// same either way; a 12 MP phone dome's radiance shrinks from 144 to about 49 MB.
 fn merge_window(
@@ -746,7 +767,6 @@ fn plain_crop(o: &Options) -> bool {
         && !o.products.consistency
         && !o.consistency
         && !o.ghosts
-        && o.weighting != merge::Weighting::Noise
 }
 
 /// The merge of `frames`' `window` alone, each frame's pixels given back once its part is
@@ -1299,7 +1319,6 @@ mod tests {
             |o: &mut Options| o.products.consistency = true,
             |o: &mut Options| o.consistency = true,
             |o: &mut Options| o.ghosts = true,
-            |o: &mut Options| o.weighting = merge::Weighting::Noise,
             |o: &mut Options| o.reference.illuminance_lux = Some(1e4),
         ] {
             let mut o = crop.clone();
@@ -1307,5 +1326,78 @@ mod tests {
             off.push(merge_window(&o, &lens, size, true, false));
         }
         assert!(off.iter().all(Option::is_none), "{off:?}");
+        // The hat merge and the noise-aware one (the default) merge the window alike.
+        for weighting in [merge::Weighting::Hat, merge::Weighting::Noise] {
+            let o = Options {
+                weighting,
+                ..crop.clone()
+            };
+            assert_eq!(merge_window(&o, &lens, size, true, false), Some(w));
+        }
+    }
+
+    /// The noise-aware merge of the dome's window alone, its model fitted on the whole frames
+    /// first, gives the whole photo's merged pixels inside the window bit for bit, and the same
+    /// noise model in the report (a fit on the window's pixels would weigh them differently).
+    #[test]
+    fn the_noise_merge_of_the_window_is_the_whole_merge_inside_it() {
+        let b = crate::synth::generate(&crate::synth::SynthOptions {
+            width: 420,
+            height: 360,
+            ..Default::default()
+        })
+        .expect("synth");
+        let lens =
+            LensProfile::from_fov(b.circle.expect("fish-eye"), 235.0, LensKind::Stereographic)
+                .expect("lens");
+        let frames = b.frames.into_iter().map(DecodedFrame::from).collect();
+        let br = bracket::assemble(frames, None, bracket::OrientationPolicy::Apply).expect("br");
+        let crop = Options {
+            sky: SkyOptions {
+                crop: true,
+                ..SkyOptions::default()
+            },
+            ..Options::default()
+        };
+        assert_eq!(crop.weighting, merge::Weighting::Noise, "the default");
+        let size = (br.width(), br.height());
+        let w = merge_window(&crop, &lens, size, true, false).expect("a window");
+        let response = crate::response::calibrate(
+            &br.frames,
+            Some(lens.circle),
+            &crate::response::CalibrateOptions::default(),
+        )
+        .expect("calibrate")
+        .response;
+        let mut quiet = |_: &Progress| ControlFlow::Continue(());
+        let mut merge = |window| {
+            let mut br = br.clone();
+            merge_stage(
+                &crop,
+                &mut br,
+                &response,
+                Some(lens.circle),
+                window,
+                None,
+                &mut Reporter(&mut quiet),
+            )
+            .expect("merge")
+        };
+        let whole = merge(None);
+        let part = merge(Some(w));
+        let (a, b) = (&whole.merged.radiance, &part.merged.radiance);
+        assert_eq!((b.width, b.height), (w.width, w.height));
+        for y in 0..w.height {
+            let s = 3 * ((w.y + y) * a.width + w.x);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(&a.data[s..s + 3 * w.width]),
+                bits(&b.data[3 * y * w.width..3 * (y + 1) * w.width]),
+                "row {y}"
+            );
+        }
+        let (na, nb) = (whole.merged.noise.expect("a model"), part.merged.noise);
+        assert_eq!(Some(na), nb);
+        assert!(na.differences > 0, "fitted from the frames: {na:?}");
     }
 }

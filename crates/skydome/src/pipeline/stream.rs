@@ -33,7 +33,8 @@
 use crate::bracket::{self, Bracket, DecodedFrame, Exposure, OrientationPolicy, Pixels};
 use crate::exposures::ExposureSource;
 use crate::fisheye::{self, CircleFit, LensProfile};
-use crate::merge::{ClippedFlags, BLACK, CLIPPED_HIGH, CLIPPED_LOW};
+use crate::merge::{ClippedFlags, Weighting, BLACK, CLIPPED_HIGH, CLIPPED_LOW};
+use crate::noise;
 use crate::pipeline::options::{AbsoluteMode, EncodedFrame, Frames, Input, LensSource};
 use crate::pipeline::options::{Options, ResponseSource};
 use crate::pipeline::progress::{Reporter, Stage};
@@ -65,6 +66,10 @@ pub(super) struct Prepared {
     pub flags: ClippedFlags,
     /// [`super::shortest_at_ceiling`] of the whole frames.
     pub at_ceiling: Vec<u32>,
+    /// For the noise-aware merge: the pixels of each frame that the noise fit reads
+    /// ([`noise::sampled_pixels`]; `width` their count, `height` 1), in the bracket's order, so
+    /// that the fit gives the whole frames' model. Empty for other weightings.
+    pub noise_samples: Vec<bracket::Frame>,
 }
 
 /// Whether `options` let a run read the frames one at a time: a plain crop to the dome (see
@@ -250,6 +255,7 @@ pub(super) fn intake(
         parts: Vec::with_capacity(br.frames.len()),
         at_ceiling: Vec::new(),
         size: (w, h),
+        noise_samples: (options.weighting == Weighting::Noise).then(Vec::new),
     };
     let mut best = Some(best_pixels);
     let read = |i: usize| -> Option<Vec<u8>> {
@@ -468,6 +474,8 @@ struct Gather {
     parts: Vec<bracket::Frame>,
     at_ceiling: Vec<u32>,
     size: (usize, usize),
+    /// [`Prepared::noise_samples`], when the merge is noise-aware.
+    noise_samples: Option<Vec<bracket::Frame>>,
 }
 
 impl Gather {
@@ -492,6 +500,16 @@ impl Gather {
                 let ext = extreme(p[0]) | extreme(p[1]) << 1 | extreme(p[2]) << 2;
                 *a &= ext | 0b11_1000;
             }
+        }
+        if let Some(samples) = self.noise_samples.as_mut() {
+            let kept = noise::sampled_pixels(v);
+            samples.push(bracket::Frame {
+                name: name.to_string(),
+                width: kept.len() / 3,
+                height: 1,
+                pixels: Pixels::U8(kept),
+                exposure,
+            });
         }
         let w = self.window;
         self.parts.push(bracket::Frame {
@@ -535,6 +553,7 @@ impl Gather {
                 black,
             },
             at_ceiling: self.at_ceiling,
+            noise_samples: self.noise_samples.unwrap_or_default(),
         }
     }
 }
