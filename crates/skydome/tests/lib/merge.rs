@@ -33,6 +33,13 @@ fn merged_radiance_meets_accuracy_targets_and_beats_opencv() {
     let mask = well_exposed_mask(&b.frames, 10, 245).unwrap();
     let r = compare(&m.radiance, &b.truth, Some(&mask), &per_channel()).unwrap();
     println!("skydome: {r:?}");
+    let hat = MergeOptions {
+        weighting: Weighting::Hat,
+        ..Default::default()
+    };
+    let h = merge(&b.frames, &cal.response, &hat).unwrap();
+    let rh = compare(&h.radiance, &b.truth, Some(&mask), &per_channel()).unwrap();
+    println!("skydome, the hat merge: {rh:?}");
     println!("OpenCV (median, p95, log2 RMSE): {OPENCV_MERGE:?}");
     assert!(r.pixels > 150_000);
     assert!(r.median_rel_error <= 0.02, "{r:?}");
@@ -48,7 +55,15 @@ fn seeds_unweighted_mean_is_worse_than_the_hat() {
     let b = generate(&SynthOptions::default()).unwrap();
     let cal = calibrate(&b.frames, b.circle, &CalibrateOptions::default()).unwrap();
     let mask = well_exposed_mask(&b.frames, 10, 245).unwrap();
-    let hat = merge(&b.frames, &cal.response, &MergeOptions::default()).unwrap();
+    let hat = merge(
+        &b.frames,
+        &cal.response,
+        &MergeOptions {
+            weighting: Weighting::Hat,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let none = merge(
         &b.frames,
         &cal.response,
