@@ -21,7 +21,7 @@ def test_run_signature_is_the_issue_s():
         "preview", "equirect", "progress", "circle",
     ]
     p = sig.parameters
-    assert p["sun"].default == "auto" and p["weighting"].default == "hat"
+    assert p["sun"].default == "auto" and p["weighting"].default == "noise"
     assert p["exposures"].default == "listed"
     assert p["fisheye"].default is False and p["times"].default is None
     assert all(p[n].kind == inspect.Parameter.KEYWORD_ONLY for n in list(p)[2:])
