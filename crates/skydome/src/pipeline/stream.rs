@@ -248,6 +248,12 @@ pub(super) fn intake(
             (w, h),
         ));
     }
+    // The merge fits the noise model unless a profile's stands in for the fit.
+    let profile_noise = match &options.response {
+        ResponseSource::Profile(p) => p.noise_estimate().is_some(),
+        ResponseSource::Calibrate(_) => false,
+    };
+    let fits_noise = options.weighting == Weighting::Noise && !profile_noise;
     let mut gather = Gather {
         window,
         black_level: options.black_level,
@@ -255,7 +261,7 @@ pub(super) fn intake(
         parts: Vec::with_capacity(br.frames.len()),
         at_ceiling: Vec::new(),
         size: (w, h),
-        noise_samples: (options.weighting == Weighting::Noise).then(Vec::new),
+        noise_samples: fits_noise.then(Vec::new),
     };
     let mut best = Some(best_pixels);
     let read = |i: usize| -> Option<Vec<u8>> {
