@@ -1281,10 +1281,9 @@ mod tests {
     use super::*;
     use crate::fisheye::LensKind;
 
-    /// The options of `tests/lib/pipeline.rs`'s window test merge the crop's square alone (so
-    /// that test compares the two paths), and every reader of the whole photo turns it off.
-    #[test]
-    fn the_window_is_merged_only_when_the_crop_reads_the_pixels_first() {
+    /// A small synthetic fish-eye bracket (420 × 360), its lens and the options of a plain
+    /// crop to the dome.
+    fn crop_case() -> (Bracket, LensProfile, Options) {
         let b = crate::synth::generate(&crate::synth::SynthOptions {
             width: 420,
             height: 360,
@@ -1303,6 +1302,14 @@ mod tests {
             },
             ..Options::default()
         };
+        (br, lens, crop)
+    }
+
+    /// The options of `tests/lib/pipeline.rs`'s window test merge the crop's square alone (so
+    /// that test compares the two paths), and every reader of the whole photo turns it off.
+    #[test]
+    fn the_window_is_merged_only_when_the_crop_reads_the_pixels_first() {
+        let (br, lens, crop) = crop_case();
         let size = (br.width(), br.height());
         let w = merge_window(&crop, &lens, size, true, false).expect("a window");
         assert!(
@@ -1341,24 +1348,7 @@ mod tests {
     /// noise model in the report (a fit on the window's pixels would weigh them differently).
     #[test]
     fn the_noise_merge_of_the_window_is_the_whole_merge_inside_it() {
-        let b = crate::synth::generate(&crate::synth::SynthOptions {
-            width: 420,
-            height: 360,
-            ..Default::default()
-        })
-        .expect("synth");
-        let lens =
-            LensProfile::from_fov(b.circle.expect("fish-eye"), 235.0, LensKind::Stereographic)
-                .expect("lens");
-        let frames = b.frames.into_iter().map(DecodedFrame::from).collect();
-        let br = bracket::assemble(frames, None, bracket::OrientationPolicy::Apply).expect("br");
-        let crop = Options {
-            sky: SkyOptions {
-                crop: true,
-                ..SkyOptions::default()
-            },
-            ..Options::default()
-        };
+        let (br, lens, crop) = crop_case();
         assert_eq!(crop.weighting, merge::Weighting::Noise, "the default");
         let size = (br.width(), br.height());
         let w = merge_window(&crop, &lens, size, true, false).expect("a window");
