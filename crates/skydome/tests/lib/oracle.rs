@@ -1154,11 +1154,11 @@ fn two_fold_residuals(
             let gj: Vec<f64> = (0..256)
                 .map(|z| if z < 96 { gd[z] + shift } else { gc[z] })
                 .collect();
-            for (k, g) in [gd.as_slice(), gc.as_slice(), gj.as_slice()]
-                .iter()
-                .enumerate()
+            for (o, g) in out
+                .iter_mut()
+                .zip([gd.as_slice(), gc.as_slice(), gj.as_slice()])
             {
-                out[k][ch].extend(skydome::response::held_out_residuals(&test, lt, g, ch));
+                o[ch].extend(skydome::response::held_out_residuals(&test, lt, g, ch));
             }
         }
     }
@@ -1222,12 +1222,9 @@ fn cross_validated_choice() {
             ];
             let folds = two_fold_residuals(&def, &cov);
             let mut flines = String::new();
-            for (k, name) in ["def", "cov", "join"].iter().enumerate() {
-                for ch in 0..3 {
-                    flines += &format!(
-                        "F\t{seed}\t{n}\t{name}\t{ch}\t{}\n",
-                        band_stats(&folds[k][ch])
-                    );
+            for (fk, name) in folds.iter().zip(["def", "cov", "join"]) {
+                for (ch, r) in fk.iter().enumerate() {
+                    flines += &format!("F\t{seed}\t{n}\t{name}\t{ch}\t{}\n", band_stats(r));
                 }
             }
             let mut bline = format!("B\t{seed}\t{n}\t{floor:.6}\t{orc_sun:.4}\t{}", val.count());
