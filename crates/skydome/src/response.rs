@@ -725,6 +725,44 @@ fn noise_weights(samples: &Samples, lt: &[f64], c: usize, g: &[f64], e: &[f64]) 
     w
 }
 
+/// Leave-one-out residuals of curve `g` (one channel's, 256 entries, `ln` units) on samples it
+/// was not fitted to (a held-out draw, [`crate::sampling::sample_held_out`]), channel `c`:
+/// for every observation `Z_ij` in `1..=254`, `g(Z_ij) − ln Δt_j − ln Ê_i` where `ln Ê_i` is the
+/// hat-weighted mean of `g(Z_ik) − ln Δt_k` over the sample's *other* frames (so a wrong
+/// curve cannot agree with itself). Returns `(Z_ij, residual)` pairs; observations whose other
+/// frames carry no weight are left out. `g` is interpolated linearly between codes.
+pub fn held_out_residuals(samples: &Samples, lt: &[f64], g: &[f64], c: usize) -> Vec<(f32, f64)> {
+    let p = samples.frames.min(lt.len());
+    let g_at = |z: f32| {
+        let (z0, f0, f1) = split(z);
+        f0 * g[z0] + f1 * g[z0 + 1]
+    };
+    let mut out = Vec::new();
+    let mut v = vec![(0f64, 0f64); p];
+    for i in 0..samples.count() {
+        let (mut sw, mut swv) = (0f64, 0f64);
+        for (j, vj) in v.iter_mut().enumerate() {
+            let z = samples.z(i, j, c);
+            let w = if (1.0..=254.0).contains(&z) {
+                hat_f(z as f64)
+            } else {
+                0.0
+            };
+            *vj = (w, g_at(z) - lt[j]);
+            sw += w;
+            swv += w * vj.1;
+        }
+        for (j, &(w, vote)) in v.iter().enumerate() {
+            let z = samples.z(i, j, c);
+            if !(1.0..=254.0).contains(&z) || sw - w <= 1e-9 {
+                continue;
+            }
+            out.push((z, vote - (swv - w * vote) / (sw - w)));
+        }
+    }
+    out
+}
+
 /// Running max above the gauge, running min below it; returns the curve and changed count.
 fn make_monotonic(g: &[f64]) -> (Vec<f64>, usize) {
     let mut m = g.to_vec();

@@ -64,6 +64,10 @@ impl Draws<'_> {
                     }
                     let vals = lat.values(k, p);
                     let (x, y) = lat.cand[k];
+                    if self.exclude.contains(&(x, y)) {
+                        state[k] = State::Refused;
+                        continue;
+                    }
                     match self.refuses(vals, x, y) {
                         None => return,
                         Some(true) => {

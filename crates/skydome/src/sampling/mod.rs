@@ -540,6 +540,51 @@ pub fn sample(
     }
 }
 
+/// A draw of pixels held out from earlier draws: as [`sample`] with `opts` (which must ask for
+/// the covering or the stratified draw, [`SampleOptions::cover`] or
+/// [`SampleOptions::stratify`]; its code bands are not filled), but no candidate whose patch
+/// shares a pixel with a patch of radius `used_patch` around any position of `used` — so its
+/// noise is independent of theirs. For scoring curves fitted on `used` (a cross-validation of
+/// the calibration; [`crate::response::held_out_residuals`]).
+pub fn sample_held_out(
+    frames: &[Frame],
+    circle: Option<Circle>,
+    opts: &SampleOptions,
+    used: &[&Samples],
+    used_patch: usize,
+) -> Result<Samples, SamplingError> {
+    opts.validate()?;
+    if opts.histogram || (opts.cover == 0 && opts.stratify == 0) {
+        return Err(SamplingError::BadOption(
+            "a held-out draw needs the covering or the stratified draw".into(),
+        ));
+    }
+    let size = check_frames(frames)?;
+    let r = (used_patch + opts.patch) as isize;
+    let mut exclude = std::collections::HashSet::new();
+    for s in used {
+        for &(x, y) in &s.positions {
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    let (u, v) = (x as isize + dx, y as isize + dy);
+                    if u >= 0 && v >= 0 && (u as usize) < size.0 && (v as usize) < size.1 {
+                        exclude.insert((u as usize, v as usize));
+                    }
+                }
+            }
+        }
+    }
+    let o = SampleOptions {
+        code_bands: 0,
+        ..opts.clone()
+    };
+    let whole = Whole { frames, size };
+    match sample_from_excluding(&whole, size, circle, &o, &exclude)? {
+        Ok(s) => Ok(s),
+        Err(Missing(_)) => Err(SamplingError::NoFrames),
+    }
+}
+
 /// Where sampling reads the bracket (sorted shortest exposure first): every frame's patch
 /// means and 3 × 3 spread at a position. The whole frames ([`Whole`]), or the values gathered
 /// at planned positions while the frames were decoded one at a time ([`Gathered`]).
@@ -746,9 +791,21 @@ pub(crate) fn sample_from(
     circle: Option<Circle>,
     opts: &SampleOptions,
 ) -> Result<Result<Samples, Missing>, SamplingError> {
+    sample_from_excluding(src, size, circle, opts, &std::collections::HashSet::new())
+}
+
+/// [`sample_from`] with the lattice's candidates at `exclude` never taken (the covering and
+/// stratified draws; see [`sample_held_out`]).
+fn sample_from_excluding(
+    src: &dyn Source,
+    size: (usize, usize),
+    circle: Option<Circle>,
+    opts: &SampleOptions,
+    exclude: &std::collections::HashSet<(usize, usize)>,
+) -> Result<Result<Samples, Missing>, SamplingError> {
     opts.validate()?;
     let mut o = opts.clone();
-    let mut out = match sample_once(src, size, circle, &o)? {
+    let mut out = match sample_once(src, size, circle, &o, exclude)? {
         Ok(s) => s,
         Err(m) => return Ok(Err(m)),
     };
@@ -761,7 +818,7 @@ pub(crate) fn sample_from(
         relaxed += 1;
         o.edge_threshold *= 2.0;
         o.monotonic_tolerance = o.monotonic_tolerance.saturating_mul(2);
-        let again = match sample_once(src, size, circle, &o)? {
+        let again = match sample_once(src, size, circle, &o, exclude)? {
             Ok(s) => s,
             Err(m) => return Ok(Err(m)),
         };
@@ -790,6 +847,7 @@ fn sample_once(
     (w, h): (usize, usize),
     circle: Option<Circle>,
     opts: &SampleOptions,
+    exclude: &std::collections::HashSet<(usize, usize)>,
 ) -> Result<Result<Samples, Missing>, SamplingError> {
     let p = src.frames();
     let area = usable_area(circle, w, h)?;
@@ -814,6 +872,7 @@ fn sample_once(
         positions: Vec::with_capacity(target),
         values: Vec::with_capacity(target * p),
         taken: std::collections::HashSet::new(),
+        exclude,
         scratch: vec![[0f32; 3]; p],
     };
     let mut lattice = None;
@@ -954,6 +1013,8 @@ struct Draws<'a> {
     positions: Vec<(usize, usize)>,
     values: Vec<[f32; 3]>,
     taken: std::collections::HashSet<(usize, usize)>,
+    /// Lattice candidates never taken (held out for an earlier draw; [`sample_held_out`]).
+    exclude: &'a std::collections::HashSet<(usize, usize)>,
     /// The candidate's patch means, one per frame.
     scratch: Vec<[f32; 3]>,
 }
@@ -1209,6 +1270,9 @@ impl Draws<'_> {
                     any = true;
                     let vals = lat.values(k, p);
                     let (x, y) = lat.cand[k];
+                    if self.exclude.contains(&(x, y)) {
+                        continue;
+                    }
                     match self.refuses(vals, x, y) {
                         None => return,
                         Some(true) => continue,

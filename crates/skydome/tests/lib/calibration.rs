@@ -489,3 +489,116 @@ fn film_scan_curve_keeps_both_ends() {
 /// Bounds of [`film_scan_curve_keeps_both_ends`], stops (measured values in the test's output).
 /// Measured 0.039 / 0.029 / 0.022 (the default grid + hat fit: 0.044 / 0.046 / 0.040).
 const FILM_CURVE_BOUND: [f64; 3] = [0.06, 0.045, 0.035];
+
+/// A held-out draw (`sampling::sample_held_out`, issue 27 part 4) shares no pixel with the
+/// calibration samples' patches, still covers the bracket's codes, and refuses the grid draw.
+#[test]
+fn a_held_out_draw_keeps_away_from_the_calibration_samples() {
+    let c = crate::oracle::case(3, 3);
+    let cal = calibrate(&c.frames, c.circle, &CalibrateOptions::covering()).unwrap();
+    let o = SampleOptions {
+        patch: 0,
+        seed: 7,
+        ..SampleOptions::covering()
+    };
+    let held =
+        skydome::sampling::sample_held_out(&c.frames, c.circle, &o, &[&cal.samples], 1).unwrap();
+    // 2000 covering samples of 3 × 3 patches leave part of the 160 × 160 bracket free.
+    assert!(held.count() >= 500, "{} held-out samples", held.count());
+    let near = held
+        .positions
+        .iter()
+        .filter(|&&(x, y)| {
+            cal.samples
+                .positions
+                .iter()
+                .any(|&(u, v)| u.abs_diff(x) <= 1 && v.abs_diff(y) <= 1)
+        })
+        .count();
+    assert_eq!(near, 0);
+    // Without the exclusion the same draw reuses calibration pixels.
+    let free = skydome::sampling::sample_held_out(&c.frames, c.circle, &o, &[], 1).unwrap();
+    let reused = free
+        .positions
+        .iter()
+        .filter(|p| cal.samples.positions.contains(p))
+        .count();
+    assert!(reused > 100, "{reused}");
+    assert!(skydome::sampling::sample_held_out(
+        &c.frames,
+        c.circle,
+        &SampleOptions::default(),
+        &[&cal.samples],
+        1
+    )
+    .is_err());
+}
+
+/// Leave-one-out residuals (`response::held_out_residuals`) against ground truth: samples of
+/// a known curve `g(z) = 2.2 ln(z / 255)` read by three frames 2 stops apart (codes rounded),
+/// every observation's residual is `g(Z_ij) − ln Δt_j` minus the hat-weighted mean over the
+/// *other* frames (checked exactly on one sample); under the true curve the median |residual|
+/// of the observations at codes 8..96 is the rounding's (< 0.05 ln), under the same curve with
+/// its toe 1.5 times too steep below code 96 it is above 0.2.
+#[test]
+fn held_out_residuals_tell_a_wrong_toe() {
+    use skydome::sampling::{SampleReport, Samples};
+    let g_true = |z: f64| 2.2 * (z.max(0.5) / 255.0).ln();
+    let lt = [0.0, 4f64.ln(), 16f64.ln()];
+    let mut values = Vec::new();
+    let n = 400;
+    for i in 0..n {
+        // ln E from −9 (black in every frame but the longest) to +0.5 (clipped in the longest).
+        let le = -9.0 + 9.5 * i as f64 / (n - 1) as f64;
+        for l in lt {
+            let z = (255.0 * ((le + l) / 2.2).exp()).round().clamp(0.0, 255.0) as f32;
+            values.push([z, z, z]);
+        }
+    }
+    let s = Samples {
+        positions: (0..n).map(|i| (i, 0)).collect(),
+        values,
+        frames: 3,
+        report: SampleReport::default(),
+    };
+    let g: Vec<f64> = (0..256).map(|z| g_true(z as f64)).collect();
+    let bent: Vec<f64> = (0..256)
+        .map(|z| {
+            if z < 96 {
+                g[96] + 1.5 * (g[z] - g[96])
+            } else {
+                g[z]
+            }
+        })
+        .collect();
+    // One sample by hand: frame 0 against the hat-weighted mean of frames 1 and 2.
+    let k = (0..n)
+        .find(|&i| (0..3).all(|j| (20.0..235.0).contains(&s.z(i, j, 0))))
+        .expect("a sample every frame reads");
+    let hat = |z: f32| skydome::response::hat_f(z as f64);
+    let vote = |j: usize| g_true(s.z(k, j, 0) as f64) - lt[j];
+    let (w1, w2) = (hat(s.z(k, 1, 0)), hat(s.z(k, 2, 0)));
+    let want = vote(0) - (w1 * vote(1) + w2 * vote(2)) / (w1 + w2);
+    let single = Samples {
+        positions: vec![(k, 0)],
+        values: s.values[3 * k..3 * k + 3].to_vec(),
+        frames: 3,
+        report: SampleReport::default(),
+    };
+    let got = skydome::response::held_out_residuals(&single, &lt, &g, 0);
+    assert_eq!(got.len(), 3);
+    assert!((got[0].1 - want).abs() < 1e-12, "{} vs {want}", got[0].1);
+    let median_toe = |curve: &[f64]| {
+        let mut r: Vec<f64> = skydome::response::held_out_residuals(&s, &lt, curve, 1)
+            .into_iter()
+            .filter(|&(z, _)| (8.0..96.0).contains(&z))
+            .map(|(_, r)| r.abs())
+            .collect();
+        assert!(r.len() > 100, "{} toe observations", r.len());
+        r.sort_by(f64::total_cmp);
+        r[r.len() / 2]
+    };
+    let (t, b) = (median_toe(&g), median_toe(&bent));
+    println!("toe median |residual|: true {t:.4}, bent {b:.4}");
+    assert!(t < 0.05 && b > 0.2, "true {t}, bent {b}");
+}

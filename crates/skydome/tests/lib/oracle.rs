@@ -1031,3 +1031,237 @@ fn toe_consistency(s: &skydome::sampling::Samples, lt: &[f64], g: &[f64], c: usi
     r.sort_by(f64::total_cmp);
     r[r.len() / 2]
 }
+
+/// Per channel: the sum of squares and count of `log2(a / truth) − scale_c` over `mask`, and
+/// the median of it (0 for none) — the pieces [`offset_rmse`] and [`median_offset`] pool.
+fn per_channel_offsets(
+    a: &HdrImage,
+    truth: &HdrImage,
+    mask: &[bool],
+    scale: [(f64, f64); 3],
+) -> [(f64, usize, f64); 3] {
+    [0, 1, 2].map(|c| {
+        let mut d: Vec<f64> = Vec::new();
+        for (p, _) in mask.iter().enumerate().filter(|(_, &m)| m) {
+            let (v, t) = (a.data[3 * p + c] as f64, truth.data[3 * p + c] as f64);
+            if v > 0.0 && t > 0.0 {
+                d.push((v / t).log2() - scale[c].0);
+            }
+        }
+        let ss = d.iter().map(|x| x * x).sum::<f64>();
+        let k = d.len();
+        d.sort_by(f64::total_cmp);
+        (ss, k, if k == 0 { 0.0 } else { d[k / 2] })
+    })
+}
+
+/// Per band of 16 codes: `count:median|r|:mean min(r², 1)` of leave-one-out residuals.
+fn band_stats(res: &[(f32, f64)]) -> String {
+    let mut bands: Vec<Vec<f64>> = vec![Vec::new(); 16];
+    for &(z, r) in res {
+        bands[((z as usize) / 16).min(15)].push(r);
+    }
+    bands
+        .iter_mut()
+        .map(|b| {
+            if b.is_empty() {
+                return "0:0:0".to_string();
+            }
+            let ms = b.iter().map(|r| (r * r).min(1.0)).sum::<f64>() / b.len() as f64;
+            let mut a: Vec<f64> = b.iter().map(|r| r.abs()).collect();
+            a.sort_by(f64::total_cmp);
+            format!("{}:{:.5}:{:.6}", b.len(), a[a.len() / 2], ms)
+        })
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// The draw of held-out pixels for [`cross_validated_choice`]: the covering draw of single
+/// pixels (2000, codes from 1), away from every calibration sample's patch.
+pub fn held_out_draw(
+    case: &Case,
+    used: &[&skydome::sampling::Samples],
+) -> skydome::sampling::Samples {
+    let o = skydome::sampling::SampleOptions {
+        patch: 0,
+        seed: 0x5EED_CAFE,
+        ..skydome::sampling::SampleOptions::covering()
+    };
+    skydome::sampling::sample_held_out(&case.frames, case.circle, &o, used, 1).unwrap()
+}
+
+/// The samples of `s` whose position's 8 × 8 block has parity `fold` (a checkerboard split);
+/// with `away`, only those farther than 2 pixels (Chebyshev) from every position of `away`.
+fn fold_of(
+    s: &skydome::sampling::Samples,
+    fold: usize,
+    away: Option<&skydome::sampling::Samples>,
+) -> skydome::sampling::Samples {
+    let p = s.frames;
+    let mut out = skydome::sampling::Samples {
+        positions: Vec::new(),
+        values: Vec::new(),
+        frames: p,
+        report: s.report.clone(),
+    };
+    for (i, &(x, y)) in s.positions.iter().enumerate() {
+        if (x / 8 + y / 8) % 2 != fold {
+            continue;
+        }
+        if let Some(a) = away {
+            if a.positions
+                .iter()
+                .any(|&(u, v)| u.abs_diff(x) <= 2 && v.abs_diff(y) <= 2)
+            {
+                continue;
+            }
+        }
+        out.positions.push((x, y));
+        out.values.extend_from_slice(&s.values[i * p..(i + 1) * p]);
+    }
+    out.report.used = out.positions.len();
+    out
+}
+
+/// Two-fold cross-validation of the three candidate curves: each fitted on one checkerboard
+/// half of its own samples (default: the grid draw; covering: the covering draw; join: the
+/// covering half's curve with the default half's toe below 96), its leave-one-out residuals on
+/// the other half of the covering draw (away from the fitting samples), both ways; per
+/// candidate and channel, the residuals pooled.
+fn two_fold_residuals(
+    def: &skydome::response::Calibration,
+    cov: &skydome::response::Calibration,
+) -> [[Vec<(f32, f64)>; 3]; 3] {
+    use skydome::response::calibrate_samples_with;
+    let lt = &cov.log_times;
+    let mut out: [[Vec<(f32, f64)>; 3]; 3] = Default::default();
+    for fold in 0..2 {
+        let d = fold_of(&def.samples, fold, None);
+        let cv = fold_of(&cov.samples, fold, None);
+        let (Ok(fd), Ok(fc)) = (
+            calibrate_samples_with(d.clone(), lt, &CalibrateOptions::default()),
+            calibrate_samples_with(cv.clone(), lt, &CalibrateOptions::covering()),
+        ) else {
+            continue;
+        };
+        let mut both = d.clone();
+        both.positions.extend_from_slice(&cv.positions);
+        let test = fold_of(&cov.samples, 1 - fold, Some(&both));
+        for ch in 0..3 {
+            let gd = &fd.response.curves()[ch];
+            let gc = &fc.response.curves()[ch];
+            let shift = gc[96] - gd[96];
+            let gj: Vec<f64> = (0..256)
+                .map(|z| if z < 96 { gd[z] + shift } else { gc[z] })
+                .collect();
+            for (o, g) in out
+                .iter_mut()
+                .zip([gd.as_slice(), gc.as_slice(), gj.as_slice()])
+            {
+                o[ch].extend(skydome::response::held_out_residuals(&test, lt, g, ch));
+            }
+        }
+    }
+    out
+}
+
+/// Cross-validation bench (issue 27 part 4, fourth round): per bracket, the default
+/// calibration, the covering calibration and the covering calibration with the default's toe
+/// below code 96 (`join`), each merged with the noise model (the default also with the hat),
+/// and each curve's leave-one-out residuals ([`skydome::response::held_out_residuals`]) on a
+/// held-out draw of pixels ([`held_out_draw`]) and, for comparison, on the covering samples
+/// (in-sample). Writes one tab-separated line per bracket (`B`) and per candidate and channel
+/// (`C`: errors; `H`/`I`: held-out/in-sample residual stats per band of 16 codes) to
+/// `SKYDOME_ORACLE_TSV` (default `/tmp/oracle_cv.tsv`) for choice rules to be tried on.
+/// Seeds and frames as [`calibration_candidates`].
+#[test]
+#[ignore = "a tuning bench for a cross-validated calibration choice; writes a table"]
+fn cross_validated_choice() {
+    use std::io::Write;
+    let given: Option<Vec<u64>> = std::env::var("SKYDOME_ORACLE_SEEDS")
+        .ok()
+        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect());
+    let wide = given.is_none() || std::env::var("SKYDOME_ORACLE_WIDE_SUN").is_ok_and(|v| v == "1");
+    let seeds = given.unwrap_or_else(|| MORE_TUNING_SEEDS.to_vec());
+    let ns: Vec<usize> = std::env::var("SKYDOME_ORACLE_FRAMES")
+        .ok()
+        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect())
+        .unwrap_or_else(|| (2..=9).collect());
+    let path = std::env::var("SKYDOME_ORACLE_TSV").unwrap_or_else(|_| "/tmp/oracle_cv.tsv".into());
+    let mut out = std::fs::File::create(&path).unwrap();
+    for &n in &ns {
+        for &seed in &seeds {
+            let c = if wide {
+                case_with_sun(seed, n, (0.0, 87.0))
+            } else {
+                case(seed, n)
+            };
+            let [sky, ground, sun] = regions(&c);
+            let orc = oracle(&c);
+            let eo = scale_and_rmse(&orc, &c.truth, &sky);
+            let floor = rms3(eo);
+            let orc_sun = median_offset(&orc, &c.truth, &sun, eo);
+            let def = calibrate(&c.frames, c.circle, &CalibrateOptions::default()).unwrap();
+            let cov = calibrate(&c.frames, c.circle, &CalibrateOptions::covering()).unwrap();
+            let mut jc = cov.response.curves().clone();
+            for (ch, curve) in jc.iter_mut().enumerate() {
+                let grid = &def.response.curves()[ch];
+                let shift = curve[96] - grid[96];
+                for z in 0..96 {
+                    curve[z] = grid[z] + shift;
+                }
+            }
+            let join = skydome::response::Response::from_curves(jc).unwrap();
+            let val = held_out_draw(&c, &[&def.samples, &cov.samples]);
+            let lt = &cov.log_times;
+            let cands: [(&str, &skydome::response::Response, Weighting); 4] = [
+                ("def", &def.response, Weighting::Noise),
+                ("defhat", &def.response, Weighting::Hat),
+                ("cov", &cov.response, Weighting::Noise),
+                ("join", &join, Weighting::Noise),
+            ];
+            let folds = two_fold_residuals(&def, &cov);
+            let mut flines = String::new();
+            for (fk, name) in folds.iter().zip(["def", "cov", "join"]) {
+                for (ch, r) in fk.iter().enumerate() {
+                    flines += &format!("F\t{seed}\t{n}\t{name}\t{ch}\t{}\n", band_stats(r));
+                }
+            }
+            let mut bline = format!("B\t{seed}\t{n}\t{floor:.6}\t{orc_sun:.4}\t{}", val.count());
+            let mut clines = String::new();
+            for (name, resp, w) in cands {
+                let opts = MergeOptions {
+                    weighting: w,
+                    ..MergeOptions::default()
+                };
+                let img = merge(&c.frames, resp, &opts).unwrap().radiance;
+                let e = scale_and_rmse(&img, &c.truth, &sky);
+                bline += &format!(
+                    "\t{name}:{:.5}:{:.5}:{:.4}",
+                    rms3(e) / floor,
+                    offset_rmse(&img, &c.truth, &ground, e),
+                    median_offset(&img, &c.truth, &sun, e)
+                );
+                let g = per_channel_offsets(&img, &c.truth, &ground, e);
+                let s = per_channel_offsets(&img, &c.truth, &sun, e);
+                for ch in 0..3 {
+                    clines += &format!(
+                        "C\t{seed}\t{n}\t{name}\t{ch}\t{:.6}\t{:.6}\t{}\t{:.4}\t{}\t{:.4}\n",
+                        e[ch].1, g[ch].0, g[ch].1, g[ch].2, s[ch].1, s[ch].2
+                    );
+                    if w == Weighting::Noise {
+                        let curve = &resp.curves()[ch];
+                        let h = skydome::response::held_out_residuals(&val, lt, curve, ch);
+                        let i = skydome::response::held_out_residuals(&cov.samples, lt, curve, ch);
+                        clines += &format!("H\t{seed}\t{n}\t{name}\t{ch}\t{}\n", band_stats(&h));
+                        clines += &format!("I\t{seed}\t{n}\t{name}\t{ch}\t{}\n", band_stats(&i));
+                    }
+                }
+            }
+            println!("{bline}");
+            writeln!(out, "{bline}").unwrap();
+            write!(out, "{clines}").unwrap();
+            write!(out, "{flines}").unwrap();
+        }
+    }
+}
