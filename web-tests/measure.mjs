@@ -142,6 +142,8 @@ try {
   const wasm = await p.page.evaluate(() => window.__skydomeAsk('memory'));
   const coreInfo = await p.page.evaluate(() => window.__skydomeCore);
   const streamed = await p.page.evaluate(() => window.__skydomeStreamed);
+  // The idle warm-up's steps (ms each), when the app reports them.
+  const warmUp = await p.page.evaluate(() => window.__skydomeAsk('warmUp')).catch(() => null);
   // --again: the same photos picked a second time in the same page (the core's code compiled
   // and its memory touched by the first merge).
   let again = null;
@@ -184,6 +186,7 @@ try {
     wasm_bytes: raw,
     wasm_gzip_bytes: gz,
     ...(again ? { again } : {}),
+    ...(warmUp ? { warm_up_ms: warmUp.ms } : {}),
   };
   console.log(JSON.stringify(result, null, 2));
   if (outFile) writeFileSync(outFile, JSON.stringify(result, null, 2));
