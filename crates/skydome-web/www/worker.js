@@ -73,20 +73,22 @@ const ready = loadCore().then(({ m, wasm, info }) => {
   return wasm;
 });
 // Once loaded, while the app waits for the user, the core warms up in steps (each its own task,
-// so a merge asked for meanwhile starts after the current step and skips the rest):
+// so a merge asked for meanwhile starts after the current step and skips the rest), the
+// cheapest and surest first:
 // - it decodes two small JPEGs many times (4:4:4 and 4:2:0; skydome_web::warm_up_decoding,
-//   about 0.03 s) and merges a tiny synthetic bracket `?warmup=N` times (default 3; about 0.1 s
-//   each; skydome_web::warm_up), so the browser has optimised the decoder's and the pipeline's
-//   loops before the user's first merge: it optimises a function only after it has run a while,
-//   and a running call keeps its slow code (with one 256² merge, 40 functions were still
-//   optimised during the first 12 MP merge on the test machine, the first photos decoded in
-//   slow code; web-tests/profile.mjs --trace lists them);
+//   about 0.05 s), so the browser has optimised the decoder before the first photo: it
+//   optimises a function only after it has run a while, and a running call keeps its slow code
+//   (after one 256² merge alone, the first two 12 MP photos decoded in slow code on the test
+//   machine; web-tests/profile.mjs --trace shows what is compiled during a merge);
 // - it grows its memory to what a phone's 3 × 12 MP bracket needs and frees it again, so the
 //   first merge does not wait for the memory to grow (skydome_web::reserve_heap: about 0.3 s of
 //   a 1.3–1.5 s first merge on the test machine). `?reserve=MiB` on this worker's URL (from the
 //   page's own) sets the reservation; 0, none. 160 MiB: the core's memory after loading (about
 //   12 MiB) plus this stays below the 185 MiB a 3 × 12 MP merge reaches, so such a merge's tab
-//   peak is not raised (the tab holds it from then on, as after any such merge).
+//   peak is not raised (the tab holds it from then on, as after any such merge);
+// - it merges a tiny synthetic bracket `?warmup=N` times (default 3; about 0.1 s each;
+//   skydome_web::warm_up), so that the pipeline's own loops are optimised too (with one such
+//   merge, 36–39 functions were still being optimised during the first 12 MP merge).
 const reserveMiB = mibParam('reserve', 160);
 const warmUps = mibParam('warmup', 3);
 let merged = false;
@@ -105,10 +107,10 @@ ready.then(() => setTimeout(() => {
   startHelpers();
   idleSteps([
     () => warm_up_decoding(24),
-    ...Array.from({ length: warmUps }, () => () => warm_up(256)),
     () => {
       if (reserveMiB > 0 && reserve_heap(reserveMiB) === 0) console.warn(`could not reserve ${reserveMiB} MiB for the first merge`);
     },
+    ...Array.from({ length: warmUps }, () => () => warm_up(256)),
   ]);
 }, 0)).catch(() => {}); // a core that fails to load is reported by the first request
 let photos = null;   // the photos of the current bracket as files (kept for a second run, e.g. a tapped sun)
@@ -342,7 +344,7 @@ const handlers = {
   },
   async sentence({ text }) { return sentence(text); },
   async core() { return coreInfo; },
-  // What the idle warm-up did: milliseconds per step (decoding, each 256² merge, the reservation).
+  // What the idle warm-up did: milliseconds per step (decoding, the reservation, each 256² merge).
   async warmUp() { return { ms: idleMs }; },
   async memory() {
     // The wasm linear memory never shrinks: its size is the high-water mark of the core.
