@@ -13,7 +13,7 @@
 //   tools/wasm_compiles.py names by merge (which functions V8 optimised during the first merge:
 //   those the warm-up did not make hot).
 //   node profile.mjs [--size 3464] [--threads N] [--idle MS] [--reserve MiB] [--interval US]
-//                    [--top N] [--out PREFIX] [--trace [CATEGORIES]] [--no-cpu]
+//                    [--top N] [--out PREFIX] [--trace [CATEGORIES]] [--no-cpu] [--warmup N]
 // --out PREFIX writes PREFIX.first.T.cpuprofile and PREFIX.second.T.cpuprofile per thread T
 // (DevTools, Performance panel, loads them) and PREFIX.trace.json with --trace. CPU samples are
 // taken on the JavaScript threads only: V8's background compilation shows in the trace, not
@@ -31,6 +31,8 @@ const arg = (name, dflt) => {
 const size = Number(arg('--size', '3464'));
 const threads = arg('--threads', null);
 const reserve = arg('--reserve', null);
+// --warmup N loads the page with ?warmup=N (how many 256² merges the idle warm-up runs).
+const warmup = arg('--warmup', null);
 const idleMs = Number(arg('--idle', '1000'));
 const interval = Number(arg('--interval', '250'));
 const top = Number(arg('--top', '40'));
@@ -173,6 +175,7 @@ try {
   const query = new URLSearchParams();
   if (threads != null) query.set('threads', threads);
   if (reserve != null) query.set('reserve', reserve);
+  if (warmup != null) query.set('warmup', warmup);
   await p.page.goto(`${server.origin}/${query.size ? `?${query}` : ''}`);
   debug('loaded');
   await onScreen(p.page, 'camera');

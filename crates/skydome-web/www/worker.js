@@ -86,11 +86,13 @@ const ready = loadCore().then(({ m, wasm, info }) => {
 //   page's own) sets the reservation; 0, none. 160 MiB: the core's memory after loading (about
 //   12 MiB) plus this stays below the 185 MiB a 3 × 12 MP merge reaches, so such a merge's tab
 //   peak is not raised (the tab holds it from then on, as after any such merge);
-// - it merges a tiny synthetic bracket `?warmup=N` times (default 3; about 0.1 s each;
-//   skydome_web::warm_up), so that the pipeline's own loops are optimised too (with one such
-//   merge, 36–39 functions were still being optimised during the first 12 MP merge).
+// - it merges a tiny synthetic bracket `?warmup=N` times (default 1; about 0.1 s each;
+//   skydome_web::warm_up), so that the pipeline's own loops are optimised too. More merges
+//   hardly help: after the decoding warm-up, 22 functions were still optimised during the first
+//   12 MP merge with one 256² merge, 21 with three (the sun search, called once per merge, and
+//   small helpers).
 const reserveMiB = mibParam('reserve', 160);
-const warmUps = mibParam('warmup', 3);
+const warmUps = mibParam('warmup', 1);
 let merged = false;
 /** Milliseconds each idle step took, in order (for web-tests/measure.mjs). */
 const idleMs = [];
