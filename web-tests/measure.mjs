@@ -58,6 +58,26 @@ function renderers(profile) {
   return out;
 }
 
+/** CPU time (s, {user, sys}, all threads: the page, the workers, V8's compiler threads) of
+ *  this test's Chromium renderer processes so far (system time is mostly the kernel backing
+ *  fresh pages). Under load, CPU time says more than wall
+ *  time about what a merge costs (10 ms resolution). */
+function rendererCpu(profile) {
+  let user = 0;
+  let sys = 0;
+  for (const pid of readdirSync('/proc').filter((d) => /^\d+$/.test(d))) {
+    try {
+      const cmd = readFileSync(`/proc/${pid}/cmdline`, 'latin1');
+      if (!cmd.includes('--type=renderer') || !cmd.includes(profile)) continue;
+      // Fields after the command's closing parenthesis: utime and stime are the 12th and 13th.
+      const f = readFileSync(`/proc/${pid}/stat`, 'latin1').split(') ')[1].split(' ');
+      user += Number(f[11]);
+      sys += Number(f[12]);
+    } catch { /* process ended */ }
+  }
+  return { user: user / 100, sys: sys / 100 }; // USER_HZ
+}
+
 const peaks = new Map();
 // The tab's resident set over the merge (ms since the photos were picked, MB), to see which step
 // makes the peak.
@@ -126,9 +146,11 @@ try {
   const since = await p.page.evaluate(() => Date.now());
   const w0 = performance.now();
   t0 = w0;
+  const cpu0 = rendererCpu(p.profile);
   await p.page.setInputFiles('#gallery', [...frames, path.join(dir, 'times.txt')]);
   const msg = await resultOrError(p.page, since);
   const wallMs = performance.now() - w0;
+  const cpu1 = rendererCpu(p.profile);
   // The preview on screen (decoded by the page) is part of the tab's memory.
   await p.page.waitForFunction(() => document.getElementById('preview').complete);
   await p.page.waitForTimeout(1000);
@@ -142,18 +164,24 @@ try {
   const wasm = await p.page.evaluate(() => window.__skydomeAsk('memory'));
   const coreInfo = await p.page.evaluate(() => window.__skydomeCore);
   const streamed = await p.page.evaluate(() => window.__skydomeStreamed);
+  // The idle warm-up's steps (ms each), when the app reports them.
+  const warmUp = await p.page.evaluate(() => window.__skydomeAsk('warmUp')).catch(() => null);
   // --again: the same photos picked a second time in the same page (the core's code compiled
   // and its memory touched by the first merge).
   let again = null;
   if (process.argv.includes('--again')) {
     await p.page.waitForTimeout(1000);
     const since2 = await p.page.evaluate(() => Date.now());
+    const cpu2 = rendererCpu(p.profile);
     await p.page.setInputFiles('#gallery', [...frames, path.join(dir, 'times.txt')]);
     const msg2 = await resultOrError(p.page, since2);
+    const cpu3 = rendererCpu(p.profile);
     if (msg2) throw new Error(msg2);
     const stages2 = await p.page.evaluate(() => window.__skydomeStageMs);
     again = {
       browser_core_s: (await p.page.evaluate(() => window.__skydomeCoreMs)) / 1000,
+      tab_cpu_s: cpu3.user + cpu3.sys - cpu2.user - cpu2.sys,
+      tab_cpu_sys_s: cpu3.sys - cpu2.sys,
       browser_stage_s: Object.fromEntries(Object.entries(stages2).map(([k, v]) => [k, v / 1000])),
     };
   }
@@ -168,6 +196,9 @@ try {
     megapixels_each: (size * size) / 1e6,
     browser_core_s: core / 1000,
     browser_wall_s: wallMs / 1000,
+    // CPU time of the tab (all its threads) from the pick to the result on screen.
+    tab_cpu_s: cpu1.user + cpu1.sys - cpu0.user - cpu0.sys,
+    tab_cpu_sys_s: cpu1.sys - cpu0.sys,
     browser_stage_s: Object.fromEntries(Object.entries(stages).map(([k, v]) => [k, v / 1000])),
     cli_s: cliMs / 1000,
     cli_stage_s: cliStages,
@@ -184,6 +215,7 @@ try {
     wasm_bytes: raw,
     wasm_gzip_bytes: gz,
     ...(again ? { again } : {}),
+    ...(warmUp ? { warm_up_ms: warmUp.ms } : {}),
   };
   console.log(JSON.stringify(result, null, 2));
   if (outFile) writeFileSync(outFile, JSON.stringify(result, null, 2));

@@ -980,6 +980,72 @@ pub fn warm_up(size: usize) -> Result<(), WebError> {
     Ok(())
 }
 
+/// Side in pixels of the pictures [`warm_up_decoding`] decodes.
+const WARM_UP_JPEG_SIDE: u16 = 128;
+
+/// Decodes two small JPEGs `rounds` times each, through the same decoder entry as a merge
+/// (`skydome::bracket::decode`: header, EXIF reader, Huffman tables, MCU loop, IDCTs, colour
+/// conversion): one with full-resolution colour (4:4:4, as `skydome synth` and some cameras
+/// write) and one with subsampled colour (4:2:0, as phones write), both at quality 92. A
+/// 128² picture; each round is a few milliseconds even in the browser's baseline code.
+///
+/// Why: the browser's WebAssembly engine optimises a function only after it has run a while
+/// (V8: a budget per function, spent as it runs), and a running call keeps the code it
+/// started with. The JPEG decoder decodes a whole photo in one call of its MCU loop, so a
+/// first merge whose decoder was not made hot beforehand decodes its first photos entirely in
+/// the slow code; [`warm_up`]'s 256² bracket (4:2:0 only, three frames) does not spend the
+/// budgets of the 4:4:4 paths, of the header and Huffman table readers, or of the EXIF reader.
+/// Many small decodes do, for a few tens of milliseconds (measured with
+/// `web-tests/profile.mjs --trace`: which functions V8 optimises during the first merge).
+pub fn warm_up_decoding(rounds: usize) -> Result<(), WebError> {
+    let pictures = warm_up_jpegs()?;
+    for _ in 0..rounds {
+        for bytes in &pictures {
+            skydome::bracket::decode("warm-up.jpg", bytes, &DecodeOptions::default())
+                .map_err(|err| WebError::Pipeline(err.into()))?;
+        }
+    }
+    Ok(())
+}
+
+/// The two JPEGs [`warm_up_decoding`] decodes: a [`WARM_UP_JPEG_SIDE`]² picture at quality 92,
+/// 4:4:4 then 4:2:0.
+pub fn warm_up_jpegs() -> Result<[Vec<u8>; 2], WebError> {
+    let side = WARM_UP_JPEG_SIDE;
+    let n = usize::from(side);
+    // A smooth gradient with a little texture, so that the blocks have AC coefficients of
+    // several sizes (Huffman codes of several lengths), as a photo of the sky has.
+    let mut rgb = Vec::with_capacity(3 * n * n);
+    for y in 0..n {
+        for x in 0..n {
+            let t = ((x * 7919 + y * 104_729) % 23) as u8;
+            rgb.extend_from_slice(&[
+                (x * 2) as u8 ^ t,
+                (y * 2) as u8,
+                ((x + y) as u8).wrapping_add(t * 3),
+            ]);
+        }
+    }
+    let encode = |sampling| -> Result<Vec<u8>, WebError> {
+        let mut out = Vec::new();
+        let mut enc = jpeg_encoder::Encoder::new(&mut out, DEFAULT_JPEG_QUALITY);
+        enc.set_sampling_factor(sampling);
+        enc.encode(&rgb, side, side, jpeg_encoder::ColorType::Rgb)
+            .map_err(|e| WebError::Encode(e.to_string()))?;
+        Ok(out)
+    };
+    Ok([
+        encode(jpeg_encoder::SamplingFactor::F_1_1)?,
+        encode(jpeg_encoder::SamplingFactor::F_2_2)?,
+    ])
+}
+
+/// [`warm_up_decoding`] for the page.
+#[wasm_bindgen(js_name = warm_up_decoding)]
+pub fn warm_up_decoding_js(rounds: usize) -> Result<(), JsError> {
+    Ok(warm_up_decoding(rounds)?)
+}
+
 /// Grows the core's heap by `bytes` (rounded up to whole pages), writes to every 4 KiB page of
 /// it, and frees it again; returns the bytes so reserved (0 when the browser would not grant
 /// them, which is not an error: a merge then grows the memory itself, as before).

@@ -174,6 +174,31 @@ fn warm_up_runs_the_pipeline_on_a_small_synthetic_bracket() {
     assert!(skydome_web::warm_up(8).is_err(), "too small for a bracket");
 }
 
+/// The decoding warm-up covers both colour layouts a bracket comes in (4:4:4, as `skydome
+/// synth` writes; 4:2:0, as phones write: different paths through the JPEG decoder), and its
+/// pictures decode through the merge's own decoder to their size.
+#[test]
+fn decoding_warm_up_covers_444_and_420_jpegs() {
+    /// The (horizontal, vertical) sampling factors of each component, from the baseline frame
+    /// header (SOF0: FF C0, length, precision, height, width, count, then id, factors, table).
+    fn sampling(jpeg: &[u8]) -> Vec<u8> {
+        let at = jpeg
+            .windows(2)
+            .position(|w| w == [0xFF, 0xC0])
+            .expect("a baseline frame header");
+        let count = usize::from(jpeg[at + 9]);
+        (0..count).map(|k| jpeg[at + 11 + 3 * k]).collect()
+    }
+    let [full, sub] = skydome_web::warm_up_jpegs().expect("the warm-up's pictures");
+    assert_eq!(sampling(&full), [0x11, 0x11, 0x11], "4:4:4");
+    assert_eq!(sampling(&sub), [0x22, 0x11, 0x11], "4:2:0");
+    for bytes in [&full, &sub] {
+        let d = skydome::bracket::decode("w.jpg", bytes, &Default::default()).expect("decodes");
+        assert_eq!((d.width, d.height), (128, 128));
+    }
+    skydome_web::warm_up_decoding(2).expect("decoding warm-up");
+}
+
 /// The idle reservation returns what it reserved, and 0 (no panic, no abort) for what no
 /// memory can hold.
 #[test]

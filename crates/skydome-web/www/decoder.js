@@ -3,12 +3,13 @@
 // cores, and hands each back as its metadata and its samples (transferred, not copied).
 //
 // Message in: {i, name, bytes}; out: {i, meta, pixels} or {i, error: 'the core's message'}.
-// After loading it merges a tiny synthetic bracket once, so its decoder is compiled to
-// optimised code before the first real photo (see skydome_web::warm_up).
-import init, { decode_photo, warm_up } from './pkg/skydome_web.js';
+// After loading it decodes two small JPEGs many times, so its decoder is compiled to optimised
+// code before the first real photo (see skydome_web::warm_up_decoding; it decodes nothing else,
+// so the whole pipeline's warm-up, skydome_web::warm_up, would be wasted here).
+import init, { decode_photo, warm_up_decoding } from './pkg/skydome_web.js';
 
 const ready = init().then(() => {
-  try { warm_up(256); } catch (err) { console.warn(`decoder warm-up: ${err && err.message ? err.message : err}`); }
+  try { warm_up_decoding(24); } catch (err) { console.warn(`decoder warm-up: ${err && err.message ? err.message : err}`); }
 });
 
 self.onmessage = async (e) => {

@@ -12,7 +12,7 @@
 // sets the pool's size; 0 forces the single-threaded build.
 
 let Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
-  list_times, decoding_progress, sentence, warm_up, reserve_heap;
+  list_times, decoding_progress, sentence, warm_up, warm_up_decoding, reserve_heap;
 /** Which core runs: {build: 'threaded' | 'single', threads, reason} (reason: why single). */
 let coreInfo = null;
 
@@ -66,31 +66,54 @@ let memoryRef = null;
 const ready = loadCore().then(({ m, wasm, info }) => {
   ({
     Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
-    list_times, decoding_progress, sentence, warm_up, reserve_heap,
+    list_times, decoding_progress, sentence, warm_up, warm_up_decoding, reserve_heap,
   } = m);
   coreInfo = info;
   memoryRef = wasm.memory || null;
   return wasm;
 });
-// Once loaded, the core merges a tiny synthetic bracket (about 0.1 s) so the browser compiles
-// its loops into optimised code before the user's first merge (see skydome_web::warm_up), then
-// grows its memory to what a phone's 3 × 12 MP bracket needs and frees it again, so the first
-// merge does not wait for the memory to grow (skydome_web::reserve_heap: about 0.3 s of a
-// 1.3–1.5 s first merge on the test machine). Both skipped when a merge came first.
-// `?reserve=MiB` on this worker's URL (from the page's own) sets the reservation; 0, none.
-// 160 MiB: the core's memory after loading (about 12 MiB) plus this stays below the 185 MiB a
-// 3 × 12 MP merge reaches, so such a merge's tab peak is not raised (the tab holds it from then
-// on, as after any such merge).
+// Once loaded, while the app waits for the user, the core warms up in steps (each its own task,
+// so a merge asked for meanwhile starts after the current step and skips the rest), the
+// cheapest and surest first:
+// - it decodes two small JPEGs many times (4:4:4 and 4:2:0; skydome_web::warm_up_decoding,
+//   about 0.05 s), so the browser has optimised the decoder before the first photo: it
+//   optimises a function only after it has run a while, and a running call keeps its slow code
+//   (after one 256² merge alone, the first two 12 MP photos decoded in slow code on the test
+//   machine; web-tests/profile.mjs --trace shows what is compiled during a merge);
+// - it grows its memory to what a phone's 3 × 12 MP bracket needs and frees it again, so the
+//   first merge does not wait for the memory to grow (skydome_web::reserve_heap: about 0.3 s of
+//   a 1.3–1.5 s first merge on the test machine). `?reserve=MiB` on this worker's URL (from the
+//   page's own) sets the reservation; 0, none. 160 MiB: the core's memory after loading (about
+//   12 MiB) plus this stays below the 185 MiB a 3 × 12 MP merge reaches, so such a merge's tab
+//   peak is not raised (the tab holds it from then on, as after any such merge);
+// - it merges a tiny synthetic bracket `?warmup=N` times (default 1; about 0.1 s each;
+//   skydome_web::warm_up), so that the pipeline's own loops are optimised too. More merges
+//   hardly help: after the decoding warm-up, 22 functions were still optimised during the first
+//   12 MP merge with one 256² merge, 21 with three (the sun search, called once per merge, and
+//   small helpers).
 const reserveMiB = mibParam('reserve', 160);
+const warmUps = mibParam('warmup', 1);
 let merged = false;
+/** Milliseconds each idle step took, in order (for web-tests/measure.mjs). */
+const idleMs = [];
+/** Runs `steps` one task each, in turn, until a merge has started. */
+function idleSteps(steps) {
+  if (merged || steps.length === 0) return;
+  const [step, ...rest] = steps;
+  const t0 = performance.now();
+  try { step(); } catch (err) { console.warn(`warm-up: ${messageOf(err)}`); }
+  idleMs.push(Math.round(performance.now() - t0));
+  setTimeout(() => idleSteps(rest), 0);
+}
 ready.then(() => setTimeout(() => {
   startHelpers();
-  if (merged) return;
-  try { warm_up(256); } catch (err) { console.warn(`warm-up: ${messageOf(err)}`); }
-  setTimeout(() => {
-    if (merged || reserveMiB === 0) return;
-    if (reserve_heap(reserveMiB) === 0) console.warn(`could not reserve ${reserveMiB} MiB for the first merge`);
-  }, 0);
+  idleSteps([
+    () => warm_up_decoding(24),
+    () => {
+      if (reserveMiB > 0 && reserve_heap(reserveMiB) === 0) console.warn(`could not reserve ${reserveMiB} MiB for the first merge`);
+    },
+    ...Array.from({ length: warmUps }, () => () => warm_up(256)),
+  ]);
 }, 0)).catch(() => {}); // a core that fails to load is reported by the first request
 let photos = null;   // the photos of the current bracket as files (kept for a second run, e.g. a tapped sun)
 let job = null;      // the bracket handed to the core
@@ -323,6 +346,8 @@ const handlers = {
   },
   async sentence({ text }) { return sentence(text); },
   async core() { return coreInfo; },
+  // What the idle warm-up did: milliseconds per step (decoding, the reservation, each 256² merge).
+  async warmUp() { return { ms: idleMs }; },
   async memory() {
     // The wasm linear memory never shrinks: its size is the high-water mark of the core.
     return { wasmBytes: wasmMemory() };
