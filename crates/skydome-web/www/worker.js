@@ -47,13 +47,13 @@ async function loadCore() {
 // 256 MiB is read one photo at a time (the same bytes, at about 1.6× the core's time; a 3 × 12 MP
 // bracket, 108 MB, is decoded whole, the fast way). `?memory=MiB` on this worker's URL (from the
 // page's own) sets it; `?memory=none`, no limit.
-/** This worker's `?name=MiB` as whole MiB (≥ 0), or `dflt` when absent or not a number. */
-function mibParam(name, dflt) {
+/** This worker's `?name=N` as a whole number ≥ 0 (MiB or a count), or `dflt` when absent or not a number. */
+function countParam(name, dflt) {
   const v = new URL(self.location.href).searchParams.get(name);
   return v != null && v !== '' && Number.isFinite(Number(v)) ? Math.max(0, Math.floor(Number(v))) : dflt;
 }
 const frameBudget = new URL(self.location.href).searchParams.get('memory') === 'none' ? null
-  : mibParam('memory', 256) * 2 ** 20;
+  : countParam('memory', 256) * 2 ** 20;
 
 /** `optionsJson` with the frame memory budget set (unless the page set one). */
 function withBudget(optionsJson) {
@@ -91,8 +91,8 @@ const ready = loadCore().then(({ m, wasm, info }) => {
 //   hardly help: after the decoding warm-up, 22 functions were still optimised during the first
 //   12 MP merge with one 256² merge, 21 with three (the sun search, called once per merge, and
 //   small helpers).
-const reserveMiB = mibParam('reserve', 160);
-const warmUps = mibParam('warmup', 1);
+const reserveMiB = countParam('reserve', 160);
+const warmUps = countParam('warmup', 1);
 let merged = false;
 /** Milliseconds each idle step took, in order (for web-tests/measure.mjs). */
 const idleMs = [];
