@@ -606,9 +606,9 @@ fn merge_stage(
         _ => None,
     };
     let known_estimate = profile_estimate.or(fitted_estimate);
-    let profile_noise = known_estimate.map(|n| n.model);
+    let known_noise = known_estimate.map(|n| n.model);
     // The standard error needs a noise model; the frames are given back during the merge.
-    let error_noise = options.products.confidence.then(|| match profile_noise {
+    let error_noise = options.products.confidence.then(|| match known_noise {
         Some(n) => n,
         None => noise::estimate(&br.frames, response, options.black_level, None).model,
     });
@@ -627,7 +627,7 @@ fn merge_stage(
         confidence: options.products.confidence,
         // Only needed to count black pixels inside the lens circle.
         clipped_mask: lens_circle.is_some() || options.products.confidence,
-        noise: profile_noise,
+        noise: known_noise,
         black_level: options.black_level,
         consistency: options.consistency || options.ghosts || options.products.consistency,
         ghosts: options.ghosts,
