@@ -761,6 +761,22 @@ fn candidates() -> Vec<(String, CalibrateOptions)> {
     out
 }
 
+/// The tuning benches' brackets: the seeds (`SKYDOME_ORACLE_SEEDS`, default
+/// [`MORE_TUNING_SEEDS`]), whether the sun ranges over every height (the default seeds, or
+/// `SKYDOME_ORACLE_WIDE_SUN=1`) and the frame counts (`SKYDOME_ORACLE_FRAMES`, default 2–9).
+fn bench_selection() -> (Vec<u64>, bool, Vec<usize>) {
+    let given: Option<Vec<u64>> = std::env::var("SKYDOME_ORACLE_SEEDS")
+        .ok()
+        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect());
+    let wide = given.is_none() || std::env::var("SKYDOME_ORACLE_WIDE_SUN").is_ok_and(|v| v == "1");
+    let seeds = given.unwrap_or_else(|| MORE_TUNING_SEEDS.to_vec());
+    let ns: Vec<usize> = std::env::var("SKYDOME_ORACLE_FRAMES")
+        .ok()
+        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect())
+        .unwrap_or_else(|| (2..=9).collect());
+    (seeds, wide, ns)
+}
+
 /// Tuning bench: every candidate calibration with the noise merge against the oracle and against
 /// the default calibration (noise merge and hat merge), per bracket: sky ratio, dim ground,
 /// clipped sun and the curve's toe/top errors. Seeds from `SKYDOME_ORACLE_SEEDS` (comma
@@ -778,15 +794,7 @@ fn candidates() -> Vec<(String, CalibrateOptions)> {
 #[ignore = "a tuning bench for calibration candidates; prints only"]
 fn calibration_candidates() {
     use skydome::response::calibrate;
-    let given: Option<Vec<u64>> = std::env::var("SKYDOME_ORACLE_SEEDS")
-        .ok()
-        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect());
-    let wide = given.is_none() || std::env::var("SKYDOME_ORACLE_WIDE_SUN").is_ok_and(|v| v == "1");
-    let seeds = given.unwrap_or_else(|| MORE_TUNING_SEEDS.to_vec());
-    let ns: Vec<usize> = std::env::var("SKYDOME_ORACLE_FRAMES")
-        .ok()
-        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect())
-        .unwrap_or_else(|| (2..=9).collect());
+    let (seeds, wide, ns) = bench_selection();
     let cands = candidates();
     let mut ratio_sum = vec![vec![0.0f64; ns.len()]; cands.len() + 2];
     let mut losses = vec![[0usize; 3]; cands.len()];
@@ -1178,15 +1186,7 @@ fn two_fold_residuals(
 #[ignore = "a tuning bench for a cross-validated calibration choice; writes a table"]
 fn cross_validated_choice() {
     use std::io::Write;
-    let given: Option<Vec<u64>> = std::env::var("SKYDOME_ORACLE_SEEDS")
-        .ok()
-        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect());
-    let wide = given.is_none() || std::env::var("SKYDOME_ORACLE_WIDE_SUN").is_ok_and(|v| v == "1");
-    let seeds = given.unwrap_or_else(|| MORE_TUNING_SEEDS.to_vec());
-    let ns: Vec<usize> = std::env::var("SKYDOME_ORACLE_FRAMES")
-        .ok()
-        .map(|s| s.split(',').filter_map(|v| v.trim().parse().ok()).collect())
-        .unwrap_or_else(|| (2..=9).collect());
+    let (seeds, wide, ns) = bench_selection();
     let path = std::env::var("SKYDOME_ORACLE_TSV").unwrap_or_else(|_| "/tmp/oracle_cv.tsv".into());
     let mut out = std::fs::File::create(&path).unwrap();
     for &n in &ns {
