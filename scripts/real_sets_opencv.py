@@ -4,13 +4,15 @@
 How to run (from the repository root; needs numpy and opencv-python-headless):
 
     python3 -m venv target/cv-venv && target/cv-venv/bin/pip install numpy opencv-python-headless
-    target/cv-venv/bin/python scripts/real_sets_opencv.py [DATA_DIR]      # default ../shared/data
+    target/cv-venv/bin/python scripts/real_sets_opencv.py [--align] [DATA_DIR]   # default ../shared/data
 
 For each set: `CalibrateDebevec()` and `MergeDebevec()` with OpenCV's defaults (70 samples,
 lambda 10) on the frames as decoded RGB, then per frame the median over its well-exposed pixels
 (all channels in 20..=235) of |log2(E_frame / E_merged)|, E_frame = crf(Z) / t from OpenCV's own
 curve — the same measure as skydome's `frame_consistency` (crates/skydome/tests/common/mod.rs).
-Prints one JSON object: set -> per-frame list (shortest first). The numbers are pasted into
+With `--align` the hand-held banterle_alignment is aligned first (`cv2.createAlignMTB`, as
+OpenCV's HDR tutorial does; `OPENCV_ALIGNED_BANTERLE` in noise_merge.rs), the other sets as
+without. Prints one JSON object: set -> per-frame list (shortest first). The numbers are pasted into
 `OPENCV_FRAME_CONSISTENCY` in crates/skydome/tests/lib/noise_merge.rs and docs/accuracy.md.
 """
 import json
@@ -50,7 +52,9 @@ def consistency(frames, times, crf, merged):
 
 
 def main():
-    data = sys.argv[1] if len(sys.argv) > 1 else os.path.join("..", "shared", "data")
+    args = [a for a in sys.argv[1:] if a != "--align"]
+    align = len(args) < len(sys.argv) - 1
+    data = args[0] if args else os.path.join("..", "shared", "data")
     result = {}
     for name, files in SETS.items():
         files = sorted(files, key=lambda f: f[1])
@@ -59,6 +63,10 @@ def main():
             bgr = cv2.imread(os.path.join(data, name, f), cv2.IMREAD_COLOR)
             rgb.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
         times = np.array([t for _, t in files], dtype=np.float32)
+        if align and name == "banterle_alignment":
+            aligned = [x.copy() for x in rgb]
+            cv2.createAlignMTB().process(rgb, aligned)
+            rgb = aligned
         crf = cv2.createCalibrateDebevec().process(rgb, times)[:, 0, :]
         merged = cv2.createMergeDebevec().process(rgb, times, crf[:, None, :].copy())
         result[name] = [round(v, 4) for v in consistency(rgb, times, crf, merged)]

@@ -985,3 +985,87 @@ fn a_profiles_noise_model_is_scaled_to_the_brackets_iso() {
     // gamma-like curve), so the fitted model's error is scaled less than 4×.
     assert!(fitted_unscaled_error < fitted_scaled_error && fitted_scaled_error < true_error);
 }
+
+/// OpenCV's frame consistency on banterle_alignment with its frames aligned first
+/// (`cv2.createAlignMTB`, the same shifts as skydome's [`skydome::align`]; shortest first),
+/// from `scripts/real_sets_opencv.py --align`.
+const OPENCV_ALIGNED_BANTERLE: [f64; 3] = [0.0844, 0.0648, 0.0744];
+
+/// Tuning bench (issue 27, fifth round): per real set, the frame consistency of the default,
+/// covering and `join` (covering above code 96, the default's toe below) calibrations and of
+/// the candidates in `SKYDOME_ORACLE_CANDIDATES` (as `oracle::calibration_candidates`), merged
+/// with the noise model (`SKYDOME_REAL_HAT=1`: the hat), against OpenCV's. With
+/// `SKYDOME_REAL_ALIGN=1` the hand-held banterle_alignment is aligned first
+/// ([`skydome::align::align_bracket`]) and compared with OpenCV's aligned frames
+/// ([`OPENCV_ALIGNED_BANTERLE`]). Prints only (docs/accuracy.md, "Fifth round"):
+/// `cargo test --release -p skydome --test lib -- --ignored real_sets_calibration_choices --nocapture`.
+#[test]
+#[ignore = "a tuning bench; prints only"]
+fn real_sets_calibration_choices() {
+    let Some(sets) = real_sets_for_measuring() else {
+        return;
+    };
+    let on = |k: &str| std::env::var(k).is_ok_and(|v| v == "1");
+    let weighting = if on("SKYDOME_REAL_HAT") {
+        Weighting::Hat
+    } else {
+        Weighting::Noise
+    };
+    for ((name, mut frames, same), (_, cv)) in sets.into_iter().zip(OPENCV_FRAME_CONSISTENCY) {
+        let cv: &[f64] = if name == "banterle_alignment" && on("SKYDOME_REAL_ALIGN") {
+            let a = skydome::align::align_bracket(&mut frames, &Default::default());
+            println!("{name}: aligned, shifts {:?}", a.shifts);
+            &OPENCV_ALIGNED_BANTERLE
+        } else {
+            cv
+        };
+        let (cmed, cwst) = (median_of(cv), cv.iter().copied().fold(0.0, f64::max));
+        let mut cands = vec![
+            ("default".to_string(), CalibrateOptions::default()),
+            ("covering".to_string(), CalibrateOptions::covering()),
+            ("join".to_string(), CalibrateOptions::covering()),
+        ];
+        cands.extend(crate::oracle::candidates());
+        for (which, o) in cands {
+            let mut fr = frames.clone();
+            let (mut response, merged_frames, all) = if name == "ssarcandy_street" {
+                let (cal, m, _) = calibrate_measuring(&mut fr, &same, None, &o, 0).unwrap();
+                let left_out = apply(&mut fr, &m);
+                let all: Vec<_> = fr.iter().cloned().chain(left_out).collect();
+                (cal.response, fr, all)
+            } else {
+                let cal = calibrate(&fr, None, &o).unwrap();
+                (cal.response, fr.clone(), fr)
+            };
+            if which == "join" {
+                let def = calibrate(&merged_frames, None, &CalibrateOptions::default()).unwrap();
+                let mut jc = response.curves().clone();
+                for (ch, curve) in jc.iter_mut().enumerate() {
+                    let grid = &def.response.curves()[ch];
+                    let shift = curve[96] - grid[96];
+                    for z in 0..96 {
+                        curve[z] = grid[z] + shift;
+                    }
+                }
+                response = skydome::response::Response::from_curves(jc).unwrap();
+            }
+            let mo = MergeOptions {
+                weighting,
+                ..MergeOptions::default()
+            };
+            let m = merge(&merged_frames, &response, &mo).unwrap();
+            let per = common::frame_consistency(&all, &response, &m.radiance);
+            let med = median_of(&per);
+            let wst = per
+                .iter()
+                .copied()
+                .filter(|x| x.is_finite())
+                .fold(0.0, f64::max);
+            println!(
+                "{name} {which}: {per:.3?} median {med:.3} ({:.0} % better than OpenCV) worst {wst:.3} ({:.0} %)",
+                100.0 * (1.0 - med / cmed),
+                100.0 * (1.0 - wst / cwst)
+            );
+        }
+    }
+}

@@ -733,7 +733,7 @@ pub fn curve_error(case: &Case, g: &[Vec<f64>; 3]) -> [f64; 4] {
 /// of [`CalibrateOptions::noise_fit`] (keys `samples`, `cover`, `stratify`, `lo`, `hi`,
 /// `lambda`, `margin`, `bands`, `fit`, `patch`; `covering=1` starts again from
 /// [`CalibrateOptions::covering`], so put it first); `noise_fit` alone without the variable.
-fn candidates() -> Vec<(String, CalibrateOptions)> {
+pub fn candidates() -> Vec<(String, CalibrateOptions)> {
     let spec = std::env::var("SKYDOME_ORACLE_CANDIDATES").unwrap_or_default();
     let mut out = vec![("noise_fit".to_string(), CalibrateOptions::noise_fit())];
     for cand in spec.split(';').filter(|c| !c.trim().is_empty()) {
