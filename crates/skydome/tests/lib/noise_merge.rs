@@ -2,6 +2,7 @@
 //! hat on the same frames, and OpenCV's Debevec merge on real brackets.
 
 use crate::common;
+use skydome::bracket::{Frame, Pixels};
 use skydome::compare::well_exposed_mask;
 use skydome::exposures::{apply, calibrate_measuring, measure};
 use skydome::merge::{merge, MergeOptions, Weighting};
@@ -1065,6 +1066,89 @@ fn real_sets_calibration_choices() {
                 "{name} {which}: {per:.3?} median {med:.3} ({:.0} % better than OpenCV) worst {wst:.3} ({:.0} %)",
                 100.0 * (1.0 - med / cmed),
                 100.0 * (1.0 - wst / cwst)
+            );
+        }
+    }
+}
+
+/// Per frame of `frames`: the median over its well-exposed pixels (all channels in 20..=235)
+/// and channels of `|log2(E_frame / E_rest)|`, where `E_rest` is the merge of the *other*
+/// frames (`opts`, curve `r`): how well the rest of the bracket predicts a frame it does not
+/// contain. Unlike [`common::frame_consistency`] the frame measured is not in the map it is
+/// measured against, so a merge that trusts some frames more is not favoured or penalised by
+/// that alone. Pixels the rest leaves unmeasured (non-positive) are skipped.
+fn leave_one_frame_out(frames: &[Frame], r: &Response, opts: &MergeOptions) -> Vec<f64> {
+    (0..frames.len())
+        .map(|j| {
+            let rest: Vec<Frame> = frames
+                .iter()
+                .enumerate()
+                .filter(|&(k, _)| k != j)
+                .map(|(_, f)| f.clone())
+                .collect();
+            let m = merge(&rest, r, opts).unwrap().radiance;
+            let f = &frames[j];
+            let Pixels::U8(v) = &f.pixels else {
+                panic!("8-bit")
+            };
+            let lt = f.exposure.relative().ln();
+            let mut d: Vec<f64> = Vec::new();
+            for p in 0..f.width * f.height {
+                let px = &v[3 * p..3 * p + 3];
+                if px.iter().all(|&z| (20..=235).contains(&z))
+                    && (0..3).all(|c| m.data[3 * p + c] > 0.0)
+                {
+                    for (c, &z) in px.iter().enumerate() {
+                        let ej = r.curve(c)[z as usize] - lt;
+                        let em = (m.data[3 * p + c] as f64).ln();
+                        d.push(((ej - em) / std::f64::consts::LN_2).abs());
+                    }
+                }
+            }
+            if d.is_empty() {
+                return f64::NAN;
+            }
+            d.sort_by(f64::total_cmp);
+            d[d.len() / 2]
+        })
+        .collect()
+}
+
+/// Bench: each real set's frames predicted by the merge of the others
+/// ([`leave_one_frame_out`]), the default calibration, the noise merge against the hat.
+/// banterle_alignment aligned first with `SKYDOME_REAL_ALIGN=1`. Prints only.
+#[test]
+#[ignore = "a bench; prints only"]
+fn real_sets_leave_one_frame_out() {
+    let Some(sets) = real_sets_for_measuring() else {
+        return;
+    };
+    let align = std::env::var("SKYDOME_REAL_ALIGN").is_ok_and(|v| v == "1");
+    for (name, mut frames, same) in sets {
+        if name == "banterle_alignment" && align {
+            skydome::align::align_bracket(&mut frames, &Default::default());
+        }
+        let (response, frames) = if name == "ssarcandy_street" {
+            let (cal, m, _) =
+                calibrate_measuring(&mut frames, &same, None, &CalibrateOptions::default(), 0)
+                    .unwrap();
+            let _ = apply(&mut frames, &m);
+            (cal.response, frames)
+        } else {
+            let cal = calibrate(&frames, None, &CalibrateOptions::default()).unwrap();
+            (cal.response, frames)
+        };
+        for w in [Weighting::Noise, Weighting::Hat] {
+            let o = MergeOptions {
+                weighting: w,
+                ..MergeOptions::default()
+            };
+            let per = leave_one_frame_out(&frames, &response, &o);
+            let fin: Vec<f64> = per.iter().copied().filter(|x| x.is_finite()).collect();
+            println!(
+                "{name} {w:?}: {per:.3?} median {:.3} worst {:.3}",
+                median_of(&fin),
+                fin.iter().copied().fold(0.0, f64::max)
             );
         }
     }
