@@ -1138,15 +1138,38 @@ fn real_sets_leave_one_frame_out() {
             let cal = calibrate(&frames, None, &CalibrateOptions::default()).unwrap();
             (cal.response, frames)
         };
-        for w in [Weighting::Noise, Weighting::Hat] {
+        let fitted = estimate(&frames, &response, 0, None).model;
+        let floors: Vec<f64> = std::env::var("SKYDOME_CODE_NOISE")
+            .ok()
+            .map(|s| s.split(',').filter_map(|v| v.parse().ok()).collect())
+            .unwrap_or_default();
+        let mut runs = vec![(Weighting::Noise, None, "noise".to_string())];
+        runs.push((Weighting::Hat, None, "hat".to_string()));
+        for &k in &floors {
+            let mut m = fitted;
+            for ch in &mut m.channels {
+                ch.code_noise = ch.code_noise.max(k);
+            }
+            runs.push((
+                Weighting::Noise,
+                Some(m),
+                format!("noise, code noise ≥ {k}"),
+            ));
+        }
+        for (w, model, label) in runs {
             let o = MergeOptions {
                 weighting: w,
+                noise: model,
                 ..MergeOptions::default()
             };
             let per = leave_one_frame_out(&frames, &response, &o);
             let fin: Vec<f64> = per.iter().copied().filter(|x| x.is_finite()).collect();
+            let m = merge(&frames, &response, &o).unwrap();
+            let cons = common::frame_consistency(&frames, &response, &m.radiance);
             println!(
-                "{name} {w:?}: {per:.3?} median {:.3} worst {:.3}",
+                "{name} {label}: in-sample median {:.3} worst {:.3}; left out {per:.3?} median {:.3} worst {:.3}",
+                median_of(&cons),
+                cons.iter().copied().fold(0.0, f64::max),
                 median_of(&fin),
                 fin.iter().copied().fold(0.0, f64::max)
             );
