@@ -130,7 +130,7 @@ pub(crate) struct BitStream {
     /// True if we have seen end of image marker.
     /// Don't read anything after that.
     pub seen_eoi:            bool,
-    /// Bytes taken from the reader ahead of the bit buffer, none of them 0xFF (skydome patch,
+    /// Bytes taken from the reader ahead of the bit buffer, 0xFF 0x00 as 0xFF (skydome patch,
     /// see `refill`): `window[window_pos..window_len]` are still to be used.
     window:                  [u8; WINDOW],
     window_pos:              usize,
@@ -191,11 +191,12 @@ impl BitStream {
     /// This function will only refill if `self.count` is less than 32
     ///
     /// skydome patch: the four bytes come from `self.window` when it holds them (bytes already
-    /// taken from the reader, none of them 0xFF), otherwise from `refill_slow`, the original
-    /// code. With `std`, every read of a `ZCursor` is a call of `std::io::Read::read` (with an
-    /// `io::Result`); the window makes that one call per 64 bytes instead of one per 4. The
-    /// bit buffer gets the same four bytes at the same moments as before, so the decode is
-    /// unchanged, corrupt streams included.
+    /// taken from the reader up to the next marker, stuffed 0xFF 0x00 as 0xFF), otherwise from
+    /// `refill_slow`, the original code. With `std`, every read of a `ZCursor` is a call of
+    /// `std::io::Read::read` (with an `io::Result`), and the byte-by-byte path after a 0xFF
+    /// made ten such calls; the window makes it one call per 64 bytes. The bit buffer gets the
+    /// same four bytes at the same moments as before, so the decode is unchanged, corrupt
+    /// streams included.
     #[inline(always)] // to many call sites? ( perf improvement by 4%)
     pub fn refill<T>(&mut self, reader: &mut ZReader<T>) -> Result<bool, DecodeErrors>
     where
@@ -304,7 +305,7 @@ impl BitStream {
         }
 
         if self.fill_window(reader)? {
-            // the window holds at least four bytes, none of them 0xFF: as below
+            // the window holds at least four bytes: as in `refill`
             let pos = self.window_pos;
             if let Some(&[a, b, c, d]) = self.window.get(pos..pos + 4) {
                 self.window_pos = pos + 4;
@@ -356,15 +357,17 @@ impl BitStream {
 
     /// skydome patch: puts the window's unused bytes back into the reader and empties the window
     /// (when `refill` has to read byte by byte, and before anything else reads the reader).
+    /// Each 0xFF in the window was 0xFF 0x00 in the reader.
     fn unread_window_inner<T>(&mut self, reader: &mut ZReader<T>) -> Result<(), DecodeErrors>
     where
         T: ZByteReaderTrait
     {
-        let left = self.window_len - self.window_pos;
+        let left = &self.window[self.window_pos.min(self.window_len)..self.window_len];
+        let raw = left.len() + left.iter().filter(|&&b| b == 0xFF).count();
         self.window_pos = 0;
         self.window_len = 0;
-        if left > 0 {
-            reader.rewind(left)?;
+        if raw > 0 {
+            reader.rewind(raw)?;
         }
         Ok(())
     }
@@ -383,7 +386,10 @@ impl BitStream {
     }
 
     /// skydome patch: empties the window (its unused bytes back into the reader), then reads
-    /// `WINDOW` bytes and keeps those before the first 0xFF (the rest back into the reader).
+    /// `WINDOW` bytes and keeps the entropy-coded data before the first marker, 0xFF 0x00 as
+    /// 0xFF (what the byte-by-byte refill appends), the rest back into the reader. The last
+    /// byte read is never kept alone, so that the reader is not at its end after any byte kept
+    /// (the byte-by-byte refill counts the bytes read at the end in `overread_by`).
     /// True if the window then holds at least four bytes; false, with the window empty and the
     /// reader where it was, if not or if fewer than `WINDOW` bytes are left.
     fn fill_window<T>(&mut self, reader: &mut ZReader<T>) -> Result<bool, DecodeErrors>
@@ -391,19 +397,30 @@ impl BitStream {
         T: ZByteReaderTrait
     {
         self.unread_window_inner(reader)?;
-        let Ok(bytes) = reader.read_fixed_bytes_or_error::<WINDOW>() else {
+        let Ok(raw) = reader.read_fixed_bytes_or_error::<WINDOW>() else {
             // the cursor does not advance when the read fails
             return Ok(false);
         };
-        let n = bytes.iter().position(|&b| b == 0xFF).unwrap_or(WINDOW);
+        let (mut i, mut n) = (0, 0);
+        while i < WINDOW - 1 {
+            let byte = raw[i];
+            if byte == 0xFF {
+                if raw[i + 1] != 0 {
+                    // a marker (or fill bytes before one): for the byte-by-byte refill
+                    break;
+                }
+                i += 2;
+            } else {
+                i += 1;
+            }
+            self.window[n] = byte;
+            n += 1;
+        }
         if n < 4 {
             reader.rewind(WINDOW)?;
             return Ok(false);
         }
-        if n < WINDOW {
-            reader.rewind(WINDOW - n)?;
-        }
-        self.window = bytes;
+        reader.rewind(WINDOW - i)?;
         self.window_len = n;
         Ok(true)
     }
