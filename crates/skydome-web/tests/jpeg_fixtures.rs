@@ -236,3 +236,103 @@ fn the_jpeg_fixtures_have_the_layouts_they_are_named_after() {
         assert_eq!(has_restart, c.restart > 0, "{}", c.name);
     }
 }
+
+/// Damaged copies of four fixtures (baseline 4:2:0, restart markers, progressive, 4:4:4): a tenth
+/// of the file cut out of the entropy-coded data (40–50 %), a byte of it flipped, a stray
+/// restart marker or fill bytes before a stuffed byte (0xFF 0xFF 0x00) inserted. (A file cut
+/// short is refused before it reaches the decoder: no end-of-image marker.) zune-jpeg decodes
+/// them anyway (not strict, as `image` asks) into pixels that depend on exactly when its bit
+/// reader meets the damage, so they pin down its refill: the skydome patch reads the
+/// entropy-coded data through a window of 64 bytes (vendor/zune-jpeg/PATCHED.md, third round)
+/// and must decode every byte as zune-jpeg 0.5.15 did. The digests are those of the unpatched
+/// decoder (main before that patch, `web-tests/decode-bench` built from it, the same FNV-1a of
+/// the same RGB pixels), which the patched one matched on 485 such files.
+#[test]
+fn damaged_jpeg_fixtures_decode_as_the_unpatched_decoder_did() {
+    type Damage = fn(&[u8]) -> Vec<u8>;
+    let at = |d: &[u8], percent: usize| d.len() * percent / 100;
+    let damages: [(&str, Damage); 4] = [
+        ("gap", |d| {
+            let mut b = d[..d.len() * 40 / 100].to_vec();
+            b.extend_from_slice(&d[d.len() * 50 / 100..]);
+            b
+        }),
+        ("xor60", |d| {
+            let mut b = d.to_vec();
+            b[d.len() * 60 / 100] ^= 0x5A;
+            b
+        }),
+        ("rst45", |d| {
+            let mut b = d.to_vec();
+            let p = d.len() * 45 / 100;
+            b.splice(p..p, [0xFF, 0xD3]);
+            b
+        }),
+        ("fill55", |d| {
+            let mut b = d.to_vec();
+            let p = d.len() * 55 / 100;
+            b.splice(p..p, [0xFF, 0xFF, 0x00]);
+            b
+        }),
+    ];
+    // (fixture, FNV-1a 64 of the RGB pixels per damage) from the unpatched decoder.
+    let expected = [
+        (
+            "rgb420_203x151",
+            [
+                "6e0edb37ec4d377d",
+                "f8f91c367fadd34a",
+                "3cda955954b59da2",
+                "c179b74ea4d49ec4",
+            ],
+        ),
+        (
+            "rgb420_restart3_131x67",
+            [
+                "241a1de9e47f292a",
+                "a9f704908422357c",
+                "0559158b00a858ac",
+                "9760942c9775d89c",
+            ],
+        ),
+        (
+            "rgb444_progressive_99x64",
+            [
+                "f4f3737a8fe999d7",
+                "88bbd74b13f05781",
+                "8692c711d3e51cf8",
+                "fa00c4408868c185",
+            ],
+        ),
+        (
+            "rgb444_61x45",
+            [
+                "e2ec6477b39cd692",
+                "75accbff270b6abf",
+                "380a6f107c55a95b",
+                "c0b5c5133d9e29aa",
+            ],
+        ),
+    ];
+    let dir = fixtures_dir();
+    for (name, digests) in expected {
+        let file = format!("{name}.jpg");
+        let bytes = std::fs::read(dir.join(&file)).expect("fixture");
+        // the damage lands after the first start-of-scan header (in a progressive file also in
+        // later scans' headers)
+        let sos = bytes
+            .windows(2)
+            .position(|m| m == [0xFF, 0xDA])
+            .expect("SOS");
+        assert!(
+            at(&bytes, 40) > sos + 14,
+            "{file}: damage before the first scan"
+        );
+        for ((what, damage), digest) in damages.iter().zip(digests) {
+            let damaged = damage(&bytes);
+            let (_, pixels) = skydome_web::decode_split(&file, &damaged)
+                .unwrap_or_else(|e| panic!("{file} {what}: {e}"));
+            assert_eq!(fnv1a64(&pixels), digest, "{file} {what}");
+        }
+    }
+}

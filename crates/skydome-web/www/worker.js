@@ -90,7 +90,8 @@ const ready = loadCore().then(({ m, wasm, info }) => {
 //   skydome_web::warm_up), so that the pipeline's own loops are optimised too. More merges
 //   hardly help: after the decoding warm-up, 22 functions were still optimised during the first
 //   12 MP merge with one 256² merge, 21 with three (the sun search, called once per merge, and
-//   small helpers).
+//   small helpers). So warm_up also runs the sun search 8 times on a 512² dome
+//   (skydome_web::warm_up_sun).
 const reserveMiB = countParam('reserve', 160);
 const warmUps = countParam('warmup', 1);
 let merged = false;

@@ -130,7 +130,15 @@ pub(crate) struct BitStream {
     /// True if we have seen end of image marker.
     /// Don't read anything after that.
     pub seen_eoi:            bool,
+    /// Bytes taken from the reader ahead of the bit buffer, 0xFF 0x00 as 0xFF (skydome patch,
+    /// see `refill`): `window[window_pos..window_len]` are still to be used.
+    window:                  [u8; WINDOW],
+    window_pos:              usize,
+    window_len:              usize,
 }
+
+/// Bytes read from the reader at once by `BitStream::fill_window` (skydome patch).
+const WINDOW: usize = 64;
 
 impl BitStream {
     /// Create a new BitStream
@@ -147,6 +155,9 @@ impl BitStream {
             eob_run:             0,
             overread_by:         0,
             seen_eoi:            false,
+            window:              [0; WINDOW],
+            window_pos:          0,
+            window_len:          0,
         }
     }
 
@@ -165,6 +176,9 @@ impl BitStream {
             eob_run:             0,
             overread_by:         0,
             seen_eoi:            false,
+            window:              [0; WINDOW],
+            window_pos:          0,
+            window_len:          0,
         }
     }
 
@@ -175,8 +189,41 @@ impl BitStream {
     ///    File/Memory buffer containing a valid JPEG stream
     ///
     /// This function will only refill if `self.count` is less than 32
+    ///
+    /// skydome patch: the four bytes come from `self.window` when it holds them (bytes already
+    /// taken from the reader up to the next marker, stuffed 0xFF 0x00 as 0xFF), otherwise from
+    /// `refill_slow`, the original code. With `std`, every read of a `ZCursor` is a call of
+    /// `std::io::Read::read` (with an `io::Result`), and the byte-by-byte path after a 0xFF
+    /// made ten such calls; the window makes it one call per 64 bytes. The bit buffer gets the
+    /// same four bytes at the same moments as before, so the decode is unchanged, corrupt
+    /// streams included.
     #[inline(always)] // to many call sites? ( perf improvement by 4%)
     pub fn refill<T>(&mut self, reader: &mut ZReader<T>) -> Result<bool, DecodeErrors>
+    where
+        T: ZByteReaderTrait
+    {
+        // 32 bits is enough for a decode(16 bits) and receive_extend(max 16 bits)
+        if self.bits_left < 32 {
+            let pos = self.window_pos;
+            if pos + 4 <= self.window_len {
+                if let Some(&[a, b, c, d]) = self.window.get(pos..pos + 4) {
+                    self.window_pos = pos + 4;
+                    self.bits_left += 32;
+                    self.buffer <<= 32;
+                    self.buffer |= u64::from(u32::from_be_bytes([a, b, c, d]));
+                    self.aligned_buffer = self.buffer << (64 - self.bits_left);
+                    return Ok(true);
+                }
+            }
+            return self.refill_slow(reader);
+        }
+        return Ok(true);
+    }
+
+    /// The original refill (skydome patch: out of line, called when `self.window` holds fewer
+    /// than four bytes), after an attempt to fill the window.
+    #[inline(never)]
+    fn refill_slow<T>(&mut self, reader: &mut ZReader<T>) -> Result<bool, DecodeErrors>
     where
         T: ZByteReaderTrait
     {
@@ -237,65 +284,145 @@ impl BitStream {
             };
         }
 
-        // 32 bits is enough for a decode(16 bits) and receive_extend(max 16 bits)
-        if self.bits_left < 32 {
-            if self.marker.is_some() || self.seen_eoi {
-                // found a marker, or we are in EOI
-                // also we are in over-reading mode, where we fill it with zeroes
+        if self.marker.is_some() || self.seen_eoi {
+            // found a marker, or we are in EOI
+            // also we are in over-reading mode, where we fill it with zeroes
 
-                // fill with zeroes
-                self.buffer <<= 32;
+            // fill with zeroes
+            self.buffer <<= 32;
+            self.bits_left += 32;
+            self.aligned_buffer = self.buffer << (64 - self.bits_left);
+            return Ok(true);
+        }
+
+        if self.overread_by > 0 {
+            if self.bits_left == 0 {
+                return Err(DecodeErrors::ExhaustedData);
+            }
+            // We already hit EOF while refilling. Continue consuming the buffered bits
+            // but don't synthesize additional bytes from zero-fill.
+            return Ok(true);
+        }
+
+        if self.fill_window(reader)? {
+            // the window holds at least four bytes: as in `refill`
+            let pos = self.window_pos;
+            if let Some(&[a, b, c, d]) = self.window.get(pos..pos + 4) {
+                self.window_pos = pos + 4;
                 self.bits_left += 32;
+                self.buffer <<= 32;
+                self.buffer |= u64::from(u32::from_be_bytes([a, b, c, d]));
+                self.aligned_buffer = self.buffer << (64 - self.bits_left);
+                return Ok(true);
+            }
+        }
+
+        // we optimize for the case where we don't have 255 in the stream and have 4 bytes left
+        // as it is the common case
+        //
+        // so we always read 4 bytes, if read_fixed_bytes errors out, the cursor is
+        // guaranteed not to advance in case of failure (is this true), so
+        // we revert the read later on (if we have 255), if this fails, we use the normal
+        // byte at a time read
+
+        if let Ok(bytes) = reader.read_fixed_bytes_or_error::<4>() {
+            // we have 4 bytes to spare, read the 4 bytes into a temporary buffer
+            // create buffer
+            let msb_buf = u32::from_be_bytes(bytes);
+            // check if we have 0xff
+            if !has_byte(msb_buf, 255) {
+                self.bits_left += 32;
+                self.buffer <<= 32;
+                self.buffer |= u64::from(msb_buf);
                 self.aligned_buffer = self.buffer << (64 - self.bits_left);
                 return Ok(true);
             }
 
-            if self.overread_by > 0 {
-                if self.bits_left == 0 {
-                    return Err(DecodeErrors::ExhaustedData);
-                }
-                // We already hit EOF while refilling. Continue consuming the buffered bits
-                // but don't synthesize additional bytes from zero-fill.
-                return Ok(true);
-            }
-
-            // we optimize for the case where we don't have 255 in the stream and have 4 bytes left
-            // as it is the common case
-            //
-            // so we always read 4 bytes, if read_fixed_bytes errors out, the cursor is
-            // guaranteed not to advance in case of failure (is this true), so
-            // we revert the read later on (if we have 255), if this fails, we use the normal
-            // byte at a time read
-
-            if let Ok(bytes) = reader.read_fixed_bytes_or_error::<4>() {
-                // we have 4 bytes to spare, read the 4 bytes into a temporary buffer
-                // create buffer
-                let msb_buf = u32::from_be_bytes(bytes);
-                // check if we have 0xff
-                if !has_byte(msb_buf, 255) {
-                    self.bits_left += 32;
-                    self.buffer <<= 32;
-                    self.buffer |= u64::from(msb_buf);
-                    self.aligned_buffer = self.buffer << (64 - self.bits_left);
-                    return Ok(true);
-                }
-
-                reader.rewind(4)?;
-            }
-            // This serves two reasons,
-            // 1: Make clippy shut up
-            // 2: Favour register reuse
-            let mut byte;
-            // 4 refills, if all succeed the stream should contain enough bits to decode a
-            // value
-            refill!(self.buffer, byte, self.bits_left);
-            refill!(self.buffer, byte, self.bits_left);
-            refill!(self.buffer, byte, self.bits_left);
-            refill!(self.buffer, byte, self.bits_left);
-            // Construct an MSB buffer whose top bits are the bitstream we are currently holding.
-            self.aligned_buffer = self.buffer << (64 - self.bits_left);
+            reader.rewind(4)?;
         }
+        // This serves two reasons,
+        // 1: Make clippy shut up
+        // 2: Favour register reuse
+        let mut byte;
+        // 4 refills, if all succeed the stream should contain enough bits to decode a
+        // value
+        refill!(self.buffer, byte, self.bits_left);
+        refill!(self.buffer, byte, self.bits_left);
+        refill!(self.buffer, byte, self.bits_left);
+        refill!(self.buffer, byte, self.bits_left);
+        // Construct an MSB buffer whose top bits are the bitstream we are currently holding.
+        self.aligned_buffer = self.buffer << (64 - self.bits_left);
         return Ok(true);
+    }
+
+    /// skydome patch: puts the window's unused bytes back into the reader and empties the window
+    /// (when `refill` has to read byte by byte, and before anything else reads the reader).
+    /// Each 0xFF in the window was 0xFF 0x00 in the reader.
+    fn unread_window_inner<T>(&mut self, reader: &mut ZReader<T>) -> Result<(), DecodeErrors>
+    where
+        T: ZByteReaderTrait
+    {
+        let left = &self.window[self.window_pos.min(self.window_len)..self.window_len];
+        let raw = left.len() + left.iter().filter(|&&b| b == 0xFF).count();
+        self.window_pos = 0;
+        self.window_len = 0;
+        if raw > 0 {
+            reader.rewind(raw)?;
+        }
+        Ok(())
+    }
+
+    /// skydome patch: puts the window's unused bytes back into the reader, so that its position
+    /// is the bit buffer's; to be called before anything but `refill` reads the reader.
+    #[inline]
+    pub(crate) fn unread_window<T>(&mut self, reader: &mut ZReader<T>) -> Result<(), DecodeErrors>
+    where
+        T: ZByteReaderTrait
+    {
+        if self.window_len != 0 {
+            self.unread_window_inner(reader)?;
+        }
+        Ok(())
+    }
+
+    /// skydome patch: empties the window (its unused bytes back into the reader), then reads
+    /// `WINDOW` bytes and keeps the entropy-coded data before the first marker, 0xFF 0x00 as
+    /// 0xFF (what the byte-by-byte refill appends), the rest back into the reader. The last
+    /// byte read is never kept alone, so that the reader is not at its end after any byte kept
+    /// (the byte-by-byte refill counts the bytes read at the end in `overread_by`).
+    /// True if the window then holds at least four bytes; false, with the window empty and the
+    /// reader where it was, if not or if fewer than `WINDOW` bytes are left.
+    fn fill_window<T>(&mut self, reader: &mut ZReader<T>) -> Result<bool, DecodeErrors>
+    where
+        T: ZByteReaderTrait
+    {
+        self.unread_window_inner(reader)?;
+        let Ok(raw) = reader.read_fixed_bytes_or_error::<WINDOW>() else {
+            // the cursor does not advance when the read fails
+            return Ok(false);
+        };
+        let (mut i, mut n) = (0, 0);
+        while i < WINDOW - 1 {
+            let byte = raw[i];
+            if byte == 0xFF {
+                if raw[i + 1] != 0 {
+                    // a marker (or fill bytes before one): for the byte-by-byte refill
+                    break;
+                }
+                i += 2;
+            } else {
+                i += 1;
+            }
+            self.window[n] = byte;
+            n += 1;
+        }
+        if n < 4 {
+            reader.rewind(WINDOW)?;
+            return Ok(false);
+        }
+        reader.rewind(WINDOW - i)?;
+        self.window_len = n;
+        Ok(true)
     }
     /// Decode the DC coefficient in a MCU block.
     ///
@@ -773,6 +900,9 @@ impl BitStream {
     /// everything
     #[cold]
     pub fn reset(&mut self) {
+        // skydome patch: a reset follows a marker, which `refill` finds only with the window
+        // empty, or `get_marker`, which empties it
+        debug_assert_eq!(self.window_pos, self.window_len, "bytes left in the window");
         self.bits_left = 0;
         self.marker = None;
         self.buffer = 0;

@@ -279,6 +279,8 @@ impl<T: ZByteReaderTrait> JpegDecoder<T> {
                     }
                     McuContinuation::Terminate => {
                         warn!("Got terminate signal, will not process further");
+                        // skydome patch: the reader from where the bit buffer stopped
+                        stream.unread_window(&mut self.stream)?;
                         pixels.get_mut(pixels_written..).map(|v| v.fill(128));
                         return Ok(());
                     }
@@ -445,7 +447,9 @@ impl<T: ZByteReaderTrait> JpegDecoder<T> {
         // bytes written in `fill`. Since the clobber happens in UNZIGZAG order we'd be straddling
         // most cache lines anyways even if we did a partial write with the exact length of the
         // coefficient data which was written into `tmp`.
-        let mut clobber_more_than_4x4 = true;
+        // skydome patch: `last_len`, the zig-zag length of the last block written into `tmp`,
+        // replaces that flag (64 at first: `tmp` may hold anything).
+        let mut last_len: u16 = 64;
 
         // For non-interleaved scans (PROGRESSIVE=true), each scan contains a single component
         // and we iterate over that component's actual data unit count, not the interleaved MCU
@@ -480,13 +484,15 @@ impl<T: ZByteReaderTrait> JpegDecoder<T> {
                 // here.
                 let component = &mut self.components[k];
 
+                // (skydome patch: `ok_or_else`, where `ok_or`'s error was built and its drop
+                // glue called for every block in WebAssembly)
                 let dc_table = self.dc_huffman_tables[component.dc_huff_table % MAX_COMPONENTS]
                     .as_ref()
-                    .ok_or(DecodeErrors::FormatStatic("DC table not found"))?;
+                    .ok_or_else(|| DecodeErrors::FormatStatic("DC table not found"))?;
 
                 let ac_table = self.ac_huffman_tables[component.ac_huff_table % MAX_COMPONENTS]
                     .as_ref()
-                    .ok_or(DecodeErrors::FormatStatic("AC table not found"))?;
+                    .ok_or_else(|| DecodeErrors::FormatStatic("AC table not found"))?;
 
                 let qt_table = &component.quantization_table;
                 let channel = if PROGRESSIVE {
@@ -529,9 +535,22 @@ impl<T: ZByteReaderTrait> JpegDecoder<T> {
                             // write of a zeroed vector register, which does not have
                             // any branches, instead of a more difficult pattern where
                             // we attempt to overwrite exactly one coefficient.
-                            let clobber_len = if !clobber_more_than_4x4 { 32 } else { 64 };
-
-                            tmp[..clobber_len].fill(0);
+                            //
+                            // skydome patch: only what the last block can have written is
+                            // zeroed. Its coefficients all lie before `last_len` in zig-zag
+                            // order (see `decode_mcu_block`): up to 1 that is the DC alone,
+                            // which the next block overwrites; up to 10 the upper-left 4x4.
+                            // Those 16 coefficients are zeroed by four 16-byte stores: a
+                            // `fill` of 32 or 64 coefficients of variable length was a
+                            // `memory.fill` per block in WebAssembly, a call in V8.
+                            if last_len > 10 {
+                                tmp.fill(0);
+                            } else if last_len > 1 {
+                                tmp[0..4].fill(0);
+                                tmp[8..12].fill(0);
+                                tmp[16..20].fill(0);
+                                tmp[24..28].fill(0);
+                            }
 
                             stream.decode_mcu_block(
                                 &mut self.stream,
@@ -553,21 +572,23 @@ impl<T: ZByteReaderTrait> JpegDecoder<T> {
                         // even if its bad, matching browsers.
                         //
                         // See example in https://github.com/etemesi254/zune-image/issues/293
-                        let len = if let Ok(len) = result {
-                            len
-                        } else {
-                            // result.is_err()
-                            return if self.options.strict_mode() {
-                                Err(result.err().unwrap())
-                            } else {
-                                error!("{}", result.err().unwrap());
-                                Ok(McuContinuation::Terminate)
-                            };
+                        // (skydome patch: a `match` that moves `result`, where an `if let`
+                        // left a call of its drop glue on every block in WebAssembly)
+                        let len = match result {
+                            Ok(len) => len,
+                            Err(e) => {
+                                return if self.options.strict_mode() {
+                                    Err(e)
+                                } else {
+                                    error!("{}", e);
+                                    Ok(McuContinuation::Terminate)
+                                };
+                            }
                         };
 
                         if component_samples_needed {
                             // tmp was only written partially, note that len is in ZigZag order.
-                            clobber_more_than_4x4 = len > 10;
+                            last_len = len;
 
                             let idct_position = if PROGRESSIVE {
                                 // For non-interleaved, j indexes data units directly

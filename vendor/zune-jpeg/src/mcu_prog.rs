@@ -440,6 +440,8 @@ impl<T: ZByteReaderTrait> JpegDecoder<T> {
             // if no marker and we are to reset RST, look for the marker, this matches
             // libjpeg-turbo behaviour and allows us to decode images in
             // https://github.com/etemesi254/zune-image/issues/261
+            // skydome patch: the reader from where the bit buffer stopped
+            stream.unread_window(&mut self.stream)?;
             let _start = self.stream.position()?;
             // skip bytes until we find marker
             let marker = get_marker(&mut self.stream, stream);
@@ -651,6 +653,8 @@ where
         return Ok(marker);
     }
 
+    // skydome patch: the reader from where the bit buffer stopped
+    stream.unread_window(reader)?;
     // read until we get a marker
 
     while !reader.eof()? {
