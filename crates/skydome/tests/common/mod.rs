@@ -46,24 +46,34 @@ pub fn load_jpegs(dir: &Path, files: &[(&str, f64)]) -> Vec<Frame> {
 pub fn frame_consistency(frames: &[Frame], r: &Response, merged: &skydome::HdrImage) -> Vec<f64> {
     frames
         .iter()
-        .map(|f| {
-            let Pixels::U8(v) = &f.pixels else {
-                panic!("8-bit")
-            };
-            let lt = f.exposure.relative().ln();
-            let mut d: Vec<f64> = Vec::new();
-            for p in 0..f.width * f.height {
-                let px = &v[3 * p..3 * p + 3];
-                if px.iter().all(|&z| (20..=235).contains(&z)) {
-                    for (c, &z) in px.iter().enumerate() {
-                        let ej = r.curve(c)[z as usize] - lt;
-                        let em = (merged.data[3 * p + c] as f64).ln();
-                        d.push(((ej - em) / std::f64::consts::LN_2).abs());
-                    }
-                }
-            }
-            d.sort_by(f64::total_cmp);
-            d[d.len() / 2]
-        })
+        .map(|f| frame_deviation(f, r, merged))
         .collect()
+}
+
+/// One frame's median over its well-exposed pixels (all channels in 20..=235, `map` positive
+/// in every channel) and channels of `|log2(E_frame / E_map)|` (8-bit frame; NaN when no pixel
+/// qualifies): [`frame_consistency`] when `map` is the merge of all frames, a prediction error
+/// when it is the merge of the others.
+pub fn frame_deviation(f: &Frame, r: &Response, map: &skydome::HdrImage) -> f64 {
+    let Pixels::U8(v) = &f.pixels else {
+        panic!("8-bit")
+    };
+    let lt = f.exposure.relative().ln();
+    let mut d: Vec<f64> = Vec::new();
+    for p in 0..f.width * f.height {
+        let px = &v[3 * p..3 * p + 3];
+        if px.iter().all(|&z| (20..=235).contains(&z)) && (0..3).all(|c| map.data[3 * p + c] > 0.0)
+        {
+            for (c, &z) in px.iter().enumerate() {
+                let ej = r.curve(c)[z as usize] - lt;
+                let em = (map.data[3 * p + c] as f64).ln();
+                d.push(((ej - em) / std::f64::consts::LN_2).abs());
+            }
+        }
+    }
+    if d.is_empty() {
+        return f64::NAN;
+    }
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2]
 }

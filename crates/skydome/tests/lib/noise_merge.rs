@@ -2,7 +2,7 @@
 //! hat on the same frames, and OpenCV's Debevec merge on real brackets.
 
 use crate::common;
-use skydome::bracket::{Frame, Pixels};
+use skydome::bracket::Frame;
 use skydome::compare::well_exposed_mask;
 use skydome::exposures::{apply, calibrate_measuring, measure};
 use skydome::merge::{merge, MergeOptions, Weighting};
@@ -1087,29 +1087,7 @@ fn leave_one_frame_out(frames: &[Frame], r: &Response, opts: &MergeOptions) -> V
                 .map(|(_, f)| f.clone())
                 .collect();
             let m = merge(&rest, r, opts).unwrap().radiance;
-            let f = &frames[j];
-            let Pixels::U8(v) = &f.pixels else {
-                panic!("8-bit")
-            };
-            let lt = f.exposure.relative().ln();
-            let mut d: Vec<f64> = Vec::new();
-            for p in 0..f.width * f.height {
-                let px = &v[3 * p..3 * p + 3];
-                if px.iter().all(|&z| (20..=235).contains(&z))
-                    && (0..3).all(|c| m.data[3 * p + c] > 0.0)
-                {
-                    for (c, &z) in px.iter().enumerate() {
-                        let ej = r.curve(c)[z as usize] - lt;
-                        let em = (m.data[3 * p + c] as f64).ln();
-                        d.push(((ej - em) / std::f64::consts::LN_2).abs());
-                    }
-                }
-            }
-            if d.is_empty() {
-                return f64::NAN;
-            }
-            d.sort_by(f64::total_cmp);
-            d[d.len() / 2]
+            common::frame_deviation(&frames[j], r, &m)
         })
         .collect()
 }
