@@ -11,6 +11,11 @@ use skydome::sampling::{SampleOptions, GRID_METHOD_SAMPLES};
 
 use crate::io::{self, BracketArgs, Outputs};
 
+/// `--grid`'s default.
+const GRID_DEFAULT: usize = 10;
+/// `--code-bands`' default.
+const CODE_BANDS_DEFAULT: usize = 16;
+
 /// How calibration samples and the solve are chosen (shared by `calibrate` and `merge`).
 #[derive(Debug, Clone, clap::Args)]
 pub struct CalibArgs {
@@ -20,14 +25,14 @@ pub struct CalibArgs {
     pub samples: Option<usize>,
     /// Grid size G: with --method seed or --stratify 0, samples are drawn in G×G cells over the
     /// usable area.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = GRID_DEFAULT)]
     pub grid: usize,
     /// Seed of the sample selection (same seed, same samples).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Code bands: split codes into N bands and add samples to every band the grid left with
     /// too few observations, so both ends of the curve rest on data (0 = off).
-    #[arg(long, default_value_t = 16, value_name = "N")]
+    #[arg(long, default_value_t = CODE_BANDS_DEFAULT, value_name = "N")]
     pub code_bands: usize,
     /// Stratified draw: candidates in N bands of the middle frame's code, taken from every band
     /// in turn (default 0 = the grid draw; 32 with --method noise).
@@ -45,6 +50,10 @@ pub struct CalibArgs {
     /// weight (default 0, the seed's hat; 2.55 is colour-hdri's). Not with --method seed.
     #[arg(long, value_name = "CODES")]
     pub hat_margin: Option<f64>,
+    /// `auto` (default) is `covering` for brackets of 5 frames or more and `robust` for fewer
+    /// (the better of the two at each count on synthetic brackets with a known truth, see
+    /// docs/accuracy.md); given --samples, --stratify, --fit, --lambda, --hat-margin, --grid or
+    /// --code-bands it is `robust` at every count, those options applied.
     /// `robust` rejects clipped, edge and non-monotonic samples and raises N; `noise` is robust
     /// with 2000 samples stratified over the middle frame's codes and the noise-weighted fit
     /// (λ 100); `covering` is the noise-weighted fit on 2000 samples spread over 16 code bands of
@@ -53,7 +62,7 @@ pub struct CalibArgs {
     /// Grossberg & Nayar: no alignment needed, but noisy frames bend the curve — see
     /// docs/accuracy.md; λ 30, its hat); `seed` is the original method exactly (random pixels
     /// per cell, no rejection).
-    #[arg(long, value_enum, default_value_t = Method::Robust)]
+    #[arg(long, value_enum, default_value_t = Method::Auto)]
     pub method: Method,
     /// Least-squares solver: `schur` (fast, default) or `svd` (the seed's dense SVD, slow).
     #[arg(long, default_value = "schur", value_parser = parse_solver)]
@@ -66,6 +75,8 @@ pub struct CalibArgs {
 /// Sampling method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Method {
+    /// `covering` for brackets of 5 frames or more, `robust` for fewer (the default).
+    Auto,
     /// Rejection of useless samples and automatic N.
     Robust,
     /// Robust, stratified, 2000 samples, the noise-weighted fit.
@@ -115,9 +126,25 @@ impl CalibArgs {
             solver: self.solver,
             fit: self.fit.unwrap_or(base.fit),
             hat_margin: self.hat_margin.unwrap_or(base.hat_margin),
+            ..base
         };
         match self.method {
-            Method::Robust => robust(CalibrateOptions::default()),
+            Method::Auto => {
+                let tuned = self.samples.is_some()
+                    || self.stratify.is_some()
+                    || self.fit.is_some()
+                    || self.lambda.is_some()
+                    || self.hat_margin.is_some()
+                    || self.grid != GRID_DEFAULT
+                    || self.code_bands != CODE_BANDS_DEFAULT;
+                let mut o = robust(CalibrateOptions::default());
+                if tuned {
+                    // Options of the robust method's knobs: the robust method, as asked.
+                    o.covering_from = None;
+                }
+                o
+            }
+            Method::Robust => robust(CalibrateOptions::robust()),
             Method::Noise => robust(CalibrateOptions::noise_fit()),
             Method::Covering => robust(CalibrateOptions::covering()),
             Method::ColourHdri => {

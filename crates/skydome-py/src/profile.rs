@@ -6,7 +6,7 @@ use numpy::PyArray2;
 use pyo3::prelude::*;
 use skydome::image::Circle;
 use skydome::pipeline;
-use skydome::response::{self, CalibrateOptions, Fit};
+use skydome::response::{self, CalibrateOptions};
 use skydome::sampling::SampleOptions;
 
 use crate::errors::{error, pipeline_error, value_error};
@@ -193,15 +193,16 @@ pub fn json_dumps(obj: &Bound<'_, PyAny>) -> PyResult<String> {
 /// ``frames`` and ``times`` are as for :func:`skydome.run`. Options, named and defaulted as
 /// the command line's: ``samples`` (N, raised so that N·(frames−1) ≥ 255 unless
 /// ``method="seed"``), ``grid`` (G: samples drawn in G×G cells), ``seed``, ``code_bands``,
-/// ``lambda_`` (smoothness weight λ), ``method`` (``"robust"`` or ``"seed"``, the original
-/// method exactly), ``solver`` (``"schur"`` or ``"svd"``), ``circle`` ((cx, cy, r) in pixels:
+/// ``lambda_`` (smoothness weight λ), ``method`` (``"auto"``: ``"covering"`` for brackets of
+/// five frames or more and ``"robust"`` for fewer, as the command line's default; ``"robust"``;
+/// ``"covering"``; ``"seed"``, the original method exactly), ``solver`` (``"schur"`` or ``"svd"``), ``circle`` ((cx, cy, r) in pixels:
 /// sample only inside the fish-eye circle), ``linear`` (known-linear data: a linear profile).
 /// Calibration warnings are issued as Python warnings. The GIL is released while it computes.
 ///
 /// Returns a :class:`CameraProfile` carrying the camera's EXIF make, model, ISO and date.
 #[pyfunction]
 #[pyo3(signature = (frames, times=None, *, samples=None, grid=10, seed=0, code_bands=16,
-    lambda_=None, method="robust", solver="schur", circle=None, linear=false, progress=None))]
+    lambda_=None, method="auto", solver="schur", circle=None, linear=false, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate(
     py: Python<'_>,
@@ -218,40 +219,62 @@ pub fn calibrate(
     linear: bool,
     progress: Option<Bound<'_, PyAny>>,
 ) -> PyResult<CameraProfile> {
-    let (sampling, fit) = match method.trim().to_ascii_lowercase().as_str() {
-        "robust" => (
-            SampleOptions {
-                samples: samples.unwrap_or(skydome::sampling::GRID_METHOD_SAMPLES),
-                grid,
-                seed,
-                code_bands,
-                ..SampleOptions::default()
-            },
-            Fit::Hat,
-        ),
-        "seed" => (
-            SampleOptions::seed_method(
+    let solver: response::Solver = solver
+        .parse()
+        .map_err(|e: skydome::UnknownName| value_error("solver", e))?;
+    let method = method.trim().to_ascii_lowercase();
+    let opts = match method.as_str() {
+        "auto" | "robust" => {
+            // As the command line's `--method auto`: given a knob of the robust method, the
+            // robust method at every frame count, that knob applied.
+            let tuned = samples.is_some()
+                || lambda_.is_some()
+                || grid != SampleOptions::default().grid
+                || code_bands != SampleOptions::default().code_bands;
+            let base = if method == "auto" && !tuned {
+                CalibrateOptions::default()
+            } else {
+                CalibrateOptions::robust()
+            };
+            CalibrateOptions {
+                sampling: SampleOptions {
+                    samples: samples.unwrap_or(skydome::sampling::GRID_METHOD_SAMPLES),
+                    grid,
+                    seed,
+                    code_bands,
+                    ..SampleOptions::default()
+                },
+                lambda: lambda_.unwrap_or(response::SEED_LAMBDA),
+                solver,
+                ..base
+            }
+        }
+        "covering" => {
+            let mut o = CalibrateOptions::covering();
+            o.sampling.seed = seed;
+            if let Some(n) = samples {
+                o.sampling.samples = n;
+            }
+            o.lambda = lambda_.unwrap_or(o.lambda);
+            o.solver = solver;
+            o
+        }
+        "seed" => CalibrateOptions {
+            sampling: SampleOptions::seed_method(
                 samples.unwrap_or(skydome::sampling::GRID_METHOD_SAMPLES),
                 grid,
                 seed,
             ),
-            Fit::Hat,
-        ),
+            lambda: lambda_.unwrap_or(response::SEED_LAMBDA),
+            solver,
+            ..CalibrateOptions::robust()
+        },
         _ => {
             return Err(value_error(
                 "method",
-                format!("'{method}': expected 'robust' or 'seed'"),
+                format!("'{method}': expected 'auto', 'robust', 'covering' or 'seed'"),
             ))
         }
-    };
-    let opts = CalibrateOptions {
-        sampling,
-        lambda: lambda_.unwrap_or(response::SEED_LAMBDA),
-        solver: solver
-            .parse()
-            .map_err(|e: skydome::UnknownName| value_error("solver", e))?,
-        fit,
-        hat_margin: 0.0,
     };
     let circle = match circle {
         Some((cx, cy, r)) if cx.is_finite() && cy.is_finite() && r.is_finite() && r > 0.0 => {

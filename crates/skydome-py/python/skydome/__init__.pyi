@@ -134,7 +134,7 @@ def calibrate(
     seed: int = 0,
     code_bands: int = 16,
     lambda_: Optional[float] = None,  # 30
-    method: Literal["robust", "seed"] = "robust",
+    method: Literal["auto", "robust", "covering", "seed"] = "auto",
     solver: Literal["schur", "svd"] = "schur",
     circle: Optional[Tuple[float, float, float]] = None,
     linear: bool = False,

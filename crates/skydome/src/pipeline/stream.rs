@@ -232,6 +232,9 @@ pub(super) fn intake(
     let circle = options.calibration_circle.or(Some(profile.circle));
     let plan = match &options.response {
         ResponseSource::Calibrate(o) => {
+            // The calibration this bracket's frame count asks for (the default's covering
+            // one from five frames): its draw decides what is gathered.
+            let o = o.for_frames(br.frames.len());
             match sampling::plan((w, h), br.frames.len(), circle, &o.sampling) {
                 Ok(p) => Some((p, o)),
                 Err(_) => return Ok(None),
@@ -333,7 +336,7 @@ pub(super) fn intake(
                 }
             };
             drop(gathered);
-            match response::calibrate_with_samples(&br.frames, samples, o) {
+            match response::calibrate_with_samples(&br.frames, samples, &o) {
                 Ok(cal) => calibrated_on(cal, &br),
                 Err(_) => return Ok(None),
             }

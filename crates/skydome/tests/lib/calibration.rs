@@ -96,7 +96,7 @@ fn recovered_curve_beats_opencv_calibrate_debevec_on_synthetic_bracket() {
             code_bands: 0,
             ..SampleOptions::default()
         },
-        ..Default::default()
+        ..CalibrateOptions::robust()
     };
     let cal = calibrate(&b.frames, b.circle, &o).unwrap();
     assert_eq!(cal.report().used, 128);
@@ -122,7 +122,7 @@ fn seed_method_is_reproducible_and_returns_plot_points() {
     let o = CalibrateOptions {
         sampling: SampleOptions::seed_method(100, 10, 42),
         lambda: 10.0,
-        ..Default::default()
+        ..CalibrateOptions::robust()
     };
     let a = calibrate(&b.frames, b.circle, &o).unwrap();
     let a2 = calibrate(&b.frames, b.circle, &o).unwrap();
@@ -194,7 +194,7 @@ fn stability_calls_a_good_bracket_stable_and_scrambled_frames_unstable() {
             reject: false,
             ..SampleOptions::default()
         },
-        ..Default::default()
+        ..CalibrateOptions::robust()
     };
     let st = stability(&bad, b.circle, &o, 5).unwrap();
     println!("scrambled bracket: rms spread {:.4}", st.rms_spread);
@@ -335,7 +335,7 @@ fn unsorted_or_single_frames_and_absurd_lambda_are_errors() {
     for lambda in [0.0, -1.0, f64::NAN, 1e9] {
         let o = CalibrateOptions {
             lambda,
-            ..Default::default()
+            ..CalibrateOptions::robust()
         };
         assert!(matches!(
             calibrate(&b.frames, b.circle, &o),
@@ -407,7 +407,7 @@ fn frobisher_curves_match_colour_hdri_reference_shape() {
             ..SampleOptions::default()
         },
         lambda: 30.0,
-        ..Default::default()
+        ..CalibrateOptions::robust()
     };
     let cal = calibrate(&frames, None, &like).unwrap();
     println!("frobisher histogram sampling: {:?}", cal.report());

@@ -42,7 +42,7 @@ fn banded() -> CalibrateOptions {
             code_bands: 16,
             ..SampleOptions::default()
         },
-        ..CalibrateOptions::default()
+        ..CalibrateOptions::robust()
     }
 }
 
@@ -132,7 +132,7 @@ fn the_constrained_code_range_is_reported_and_a_short_one_warned() {
             code_bands: 0,
             ..SampleOptions::default()
         },
-        ..CalibrateOptions::default()
+        ..CalibrateOptions::robust()
     };
     let frames = one_stop_bracket();
     // The codes each channel holds anywhere in the bracket: the samples cannot reach beyond.

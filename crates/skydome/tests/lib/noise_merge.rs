@@ -1039,7 +1039,7 @@ fn real_sets_calibration_choices() {
                 (cal.response, fr.clone(), fr)
             };
             if which == "join" {
-                let def = calibrate(&merged_frames, None, &CalibrateOptions::default()).unwrap();
+                let def = calibrate(&merged_frames, None, &CalibrateOptions::robust()).unwrap();
                 let mut jc = response.curves().clone();
                 for (ch, curve) in jc.iter_mut().enumerate() {
                     let grid = &def.response.curves()[ch];

@@ -647,7 +647,7 @@ fn a_bracket_read_one_frame_at_a_time_gives_the_whole_frames_bytes() {
         let margin = Options {
             response: pipeline::ResponseSource::Calibrate(CalibrateOptions {
                 hat_margin: skydome::response::COLOUR_HDRI_HAT_MARGIN,
-                ..CalibrateOptions::default()
+                ..CalibrateOptions::robust()
             }),
             ..base.clone()
         };
