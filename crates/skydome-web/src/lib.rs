@@ -1063,7 +1063,12 @@ const WARM_UP_STAGES_SIDE: usize = 512;
 pub const WARM_UP_STAGES_ROUNDS: usize = 4;
 
 /// The stages [`warm_up_stages`] runs, in its report's order.
-pub const WARM_UP_STAGES: [&str; 3] = ["lens circle", "preview tone map", "luminance statistics"];
+pub const WARM_UP_STAGES: [&str; 4] = [
+    "lens circle",
+    "preview tone map",
+    "luminance statistics",
+    "bracket checks, noise fit and merge",
+];
 
 /// One round of the stages a merge calls once over a whole picture and that a small warm-up
 /// merge does not run long enough, on `side`² synthetic pictures, through the functions the
@@ -1134,14 +1139,75 @@ pub fn warm_up_stages(side: usize) -> Result<Vec<&'static str>, WebError> {
     if stats.count > 0 && stats.max >= 1.0e4 {
         ran.push(WARM_UP_STAGES[2]);
     }
+    drop(dome);
+    if warm_up_merge(side / 2)? {
+        ran.push(WARM_UP_STAGES[3]);
+    }
     Ok(ran)
 }
 
-/// [`warm_up_stages`] for the page, on [`WARM_UP_STAGES_SIDE`]² pictures: the names of the
-/// stages that ran (call it [`WARM_UP_STAGES_ROUNDS`] times, each its own idle step).
+/// The bracket checks, the noise model's fit and the noise-weighted merge of a synthetic
+/// `side`² fish-eye bracket (three 8-bit frames, 2 EV apart, through their true response), as
+/// the pipeline calls them ([`skydome::bracket::assemble`], [`skydome::noise::estimate`],
+/// [`skydome::merge::merge`] with the fitted model, clipping flags, and the merge's warnings).
+/// Returns whether all three frames were kept, the noise model was fitted and the merge gave a
+/// radiance of the bracket's size.
+fn warm_up_merge(side: usize) -> Result<bool, WebError> {
+    use skydome::synth::{generate, SynthOptions};
+    let b = generate(&SynthOptions {
+        width: side,
+        height: side,
+        fisheye: true,
+        jpeg_quality: None,
+        ..SynthOptions::default()
+    })
+    .map_err(|e| WebError::Encode(e.to_string()))?;
+    let n = b.frames.len();
+    let decoded = b
+        .frames
+        .into_iter()
+        .map(|f| DecodedFrame {
+            name: f.name,
+            width: f.width,
+            height: f.height,
+            pixels: f.pixels,
+            exif_time_s: Some(f.exposure.time_s),
+            iso: None,
+            f_number: None,
+            info: CaptureInfo::default(),
+            non_srgb_icc: None,
+        })
+        .collect();
+    let br = skydome::bracket::assemble(decoded, None, Default::default())
+        .map_err(|e| WebError::Pipeline(e.into()))?;
+    let response = skydome::response::Response::from_curves(b.true_g)
+        .map_err(|e| WebError::Encode(e.to_string()))?;
+    let noise = skydome::noise::estimate(&br.frames, &response, 0, None);
+    let merged = skydome::merge::merge(
+        &br.frames,
+        &response,
+        &skydome::merge::MergeOptions {
+            weighting: skydome::merge::Weighting::Noise,
+            clipped_mask: true,
+            noise: Some(noise.model),
+            ..Default::default()
+        },
+    )
+    .map_err(|e| WebError::Encode(e.to_string()))?;
+    merged.warnings(b.circle.as_ref());
+    Ok(br.frames.len() == n
+        && noise.fitted
+        && merged.radiance.width == side
+        && merged.radiance.height == side)
+}
+
+/// [`warm_up_stages`] for the page, on `side`² pictures (0: [`WARM_UP_STAGES_SIDE`]): the
+/// names of the stages that ran (call it [`WARM_UP_STAGES_ROUNDS`] times, each its own idle
+/// step).
 #[wasm_bindgen(js_name = warm_up_stages)]
-pub fn warm_up_stages_js() -> Result<Vec<String>, JsError> {
-    Ok(warm_up_stages(WARM_UP_STAGES_SIDE)?
+pub fn warm_up_stages_js(side: usize) -> Result<Vec<String>, JsError> {
+    let side = if side == 0 { WARM_UP_STAGES_SIDE } else { side };
+    Ok(warm_up_stages(side)?
         .into_iter()
         .map(String::from)
         .collect())

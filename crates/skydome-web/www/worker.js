@@ -67,7 +67,8 @@ let memoryRef = null;
 const ready = loadCore().then(({ m, wasm, info }) => {
   ({
     Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
-    list_times, decoding_progress, sentence, warm_up, warm_up_decoding, reserve_heap,
+    list_times, decoding_progress, sentence, warm_up, warm_up_decoding, reserve_heap, warm_up_stages,
+    warm_up_stages_rounds,
   } = m);
   coreInfo = info;
   memoryRef = wasm.memory || null;
@@ -123,7 +124,7 @@ ready.then(() => setTimeout(() => {
     },
     ...Array.from({ length: warmUps }, () => () => warm_up(256)),
     ...Array.from({ length: countParam('stages', warm_up_stages_rounds()) }, () => () => {
-      warmUpStages.push(warm_up_stages());
+      warmUpStages.push(warm_up_stages(countParam('stageside', 0)));
     }),
   ]);
 }, 0)).catch(() => {}); // a core that fails to load is reported by the first request
