@@ -1056,7 +1056,7 @@ fn warm_up_dome(side: usize) -> (skydome::HdrImage, Vec<bool>) {
 }
 
 /// Side in pixels of the pictures [`warm_up_stages`] works on.
-const WARM_UP_STAGES_SIDE: usize = 512;
+const WARM_UP_STAGES_SIDE: usize = 384;
 
 /// How many times (idle steps of the worker, one round each) the page runs
 /// [`warm_up_stages`].
@@ -1076,10 +1076,12 @@ pub const WARM_UP_STAGES: [&str; 4] = [
 /// fish-eye photo's 8-bit RGB: a sky disc on a dark housing), the preview's tone map
 /// ([`skydome::tonemap::tonemap_u8`] with the pipeline's default tone map) and the sky's
 /// luminance statistics ([`skydome::tonemap::luminance_stats`], as the result's facts ask for
-/// them), the latter two on a cropped dome with a sun. Returns the names of the stages that ran
-/// and gave what they should (the circle within 2 % of the drawn one, a preview of `side`²
-/// pixels, statistics of the dome's pixels), from [`WARM_UP_STAGES`]. Nothing is kept: the
-/// pictures are synthetic and dropped.
+/// them), the latter two on a cropped dome with a sun, then the bracket checks, the noise fit
+/// and the merge of a synthetic (`side` / 2)² bracket ([`warm_up_merge`]). Returns the names of
+/// the stages that ran and gave what they should (the circle within 2 % of the drawn one, a
+/// preview of `side`² pixels, statistics that see the sun, a merge of every frame with a fitted
+/// noise model), from [`WARM_UP_STAGES`]. Nothing is kept: the pictures are synthetic and
+/// dropped, and none of the user's photos is read.
 ///
 /// Why: the browser's engine optimises a function only once it has spent a budget running
 /// (V8: per function), and a running call keeps the code it started with. After [`warm_up`]'s
@@ -1087,7 +1089,10 @@ pub const WARM_UP_STAGES: [&str; 4] = [
 /// (`web-tests/profile.mjs --trace`, `tools/wasm_compiles.py`) still showed these stages'
 /// functions being optimised during it: the circle's blur (`Blurred::from_rows`, `blur_row`),
 /// its fit (`kasa_fit`) and sorts, the tone map's statistics (`Acc::add_span`, `log2f`, their
-/// parallel reduction) — their budgets are spent per picture, not per pixel.
+/// parallel reduction), the bracket checks (`frames_that_inform`), the noise fit's sorts, the
+/// merge's refinement (`Refine::new`), flags and warnings: 24 functions, 130–200 ms of
+/// compiling, the code running in the baseline tier until then. After four rounds on 384²
+/// pictures (0.15–0.25 s each on the 2-core test machine), 9 (20–30 ms), none of these.
 pub fn warm_up_stages(side: usize) -> Result<Vec<&'static str>, WebError> {
     let mut ran = Vec::with_capacity(WARM_UP_STAGES.len());
     let half = side as f64 / 2.0;
@@ -1110,7 +1115,11 @@ pub fn warm_up_stages(side: usize) -> Result<Vec<&'static str>, WebError> {
         .ok_or(WebError::Missing("a warm-up photo of the stated size"))?;
     if let Ok(fit) = skydome::fisheye::detect_circle(&photo) {
         let c = fit.circle;
-        if (c.cx - half).abs().max((c.cy - half).abs()).max((c.r - drawn).abs()) <= 0.02 * drawn
+        if (c.cx - half)
+            .abs()
+            .max((c.cy - half).abs())
+            .max((c.r - drawn).abs())
+            <= 0.02 * drawn
         {
             ran.push(WARM_UP_STAGES[0]);
         }
@@ -1347,7 +1356,10 @@ mod tests {
             WARM_UP_STAGES.to_vec()
         );
         // Smaller pictures too (the circle's detection scales with them).
-        assert_eq!(warm_up_stages(256).expect("warm-up"), WARM_UP_STAGES.to_vec());
+        assert_eq!(
+            warm_up_stages(256).expect("warm-up"),
+            WARM_UP_STAGES.to_vec()
+        );
     }
 
     #[test]

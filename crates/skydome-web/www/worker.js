@@ -94,11 +94,13 @@ const ready = loadCore().then(({ m, wasm, info }) => {
 //   12 MP merge with one 256² merge, 21 with three (the sun search, called once per merge, and
 //   small helpers). So warm_up also runs the sun search 8 times on a 512² dome
 //   (skydome_web::warm_up_sun);
-// - it runs, in `?stages=N` steps (default skydome_web::warm_up_stages_rounds(), 4; about
-//   0.05 s each), the stages a merge calls once over a whole picture on 512² synthetic ones
-//   (skydome_web::warm_up_stages: the lens circle's detection, the preview's tone map, the
-//   sky's statistics): after one 256² merge, or four, V8 still optimised their functions during
-//   the first 12 MP merge. Each step reports the stages it ran (`warmUp` below, for the tests).
+// - it runs, in `?stages=N` steps (default skydome_web::warm_up_stages_rounds(), 4; 0.15–0.25 s
+//   each on the test machine), the stages a merge calls once over a whole picture, on 384²
+//   synthetic pictures (`?stageside=N` on this worker's URL; skydome_web::warm_up_stages: the
+//   lens circle's detection, the preview's tone map, the sky's statistics, the bracket checks,
+//   the noise fit and the merge): after one 256² merge, or four, V8 still optimised 24 of their
+//   functions during the first 12 MP merge (web-tests/profile.mjs --trace), after these steps
+//   about 9. Each step reports the stages it ran (`warmUp` below, for the tests).
 const reserveMiB = countParam('reserve', 160);
 const warmUps = countParam('warmup', 1);
 /** The stages each `warm_up_stages` step ran, in order (for web-tests). */
