@@ -999,6 +999,24 @@ const WARM_UP_SUN_ROUNDS: usize = 8;
 /// compile trace (`web-tests/profile.mjs --trace`) showed `find_sun` optimised during the
 /// first 12 MP merge (70–144 ms of compiling), its call in baseline code.
 pub fn warm_up_sun(side: usize, rounds: usize) -> Result<bool, WebError> {
+    let (img, clipped) = warm_up_dome(side);
+    let geom = warm_up_geometry(side)?;
+    let clues = skydome::sky::SunClues {
+        clipped: Some(&clipped),
+        prior: None,
+    };
+    let mut found = false;
+    for _ in 0..rounds {
+        found = skydome::sky::find_sun(&img, &geom, &clues)
+            .map_err(|e| WebError::Pipeline(e.into()))?
+            .is_some();
+    }
+    Ok(found)
+}
+
+/// The lens geometry of the warm-up domes: an equisolid 180° lens whose circle fills the
+/// `side`² picture.
+fn warm_up_geometry(side: usize) -> Result<SkyGeometry, WebError> {
     let half = side as f64 / 2.0;
     let lens = LensProfile::from_fov(
         Circle {
@@ -1010,8 +1028,14 @@ pub fn warm_up_sun(side: usize, rounds: usize) -> Result<bool, WebError> {
         LensKind::Equisolid,
     )
     .map_err(|e| WebError::Pipeline(e.into()))?;
-    let geom = SkyGeometry::new(&lens, 0.0, DevicePose::ScreenDown, ImageOrientation::Normal)
-        .map_err(|e| WebError::Pipeline(e.into()))?;
+    SkyGeometry::new(&lens, 0.0, DevicePose::ScreenDown, ImageOrientation::Normal)
+        .map_err(|e| WebError::Pipeline(e.into()))
+}
+
+/// A synthetic `side`² dome (linear radiance) and its clipping flags: a sky brightening
+/// downwards, a sun disc 6 px across that clipped, and a broad aureole around it (some 3 500
+/// pixels above half the peak at 512²).
+fn warm_up_dome(side: usize) -> (skydome::HdrImage, Vec<bool>) {
     let mut img = skydome::HdrImage::new(side, side);
     let mut clipped = vec![false; side * side];
     let (sx, sy) = (0.6 * side as f64, 0.4 * side as f64);
@@ -1028,17 +1052,180 @@ pub fn warm_up_sun(side: usize, rounds: usize) -> Result<bool, WebError> {
         px.fill(v);
         *clip = sun;
     }
-    let clues = skydome::sky::SunClues {
-        clipped: Some(&clipped),
-        prior: None,
-    };
-    let mut found = false;
-    for _ in 0..rounds {
-        found = skydome::sky::find_sun(&img, &geom, &clues)
-            .map_err(|e| WebError::Pipeline(e.into()))?
-            .is_some();
+    (img, clipped)
+}
+
+/// Side in pixels of the pictures [`warm_up_stages`] works on.
+const WARM_UP_STAGES_SIDE: usize = 384;
+
+/// How many times (idle steps of the worker, one round each) the page runs
+/// [`warm_up_stages`].
+pub const WARM_UP_STAGES_ROUNDS: usize = 4;
+
+/// The stages [`warm_up_stages`] runs, in its report's order.
+pub const WARM_UP_STAGES: [&str; 4] = [
+    "lens circle",
+    "preview tone map",
+    "luminance statistics",
+    "bracket checks, noise fit and merge",
+];
+
+/// One round of the stages a merge calls once over a whole picture and that a small warm-up
+/// merge does not run long enough, on `side`² synthetic pictures, through the functions the
+/// merge itself calls: the lens circle's detection ([`skydome::fisheye::detect_circle`], on a
+/// fish-eye photo's 8-bit RGB: a sky disc on a dark housing), the preview's tone map
+/// ([`skydome::tonemap::tonemap_u8`] with the pipeline's default tone map) and the sky's
+/// luminance statistics ([`skydome::tonemap::luminance_stats`], as the result's facts ask for
+/// them), the latter two on a cropped dome with a sun, then the bracket checks, the noise fit
+/// and the merge of a synthetic (`side` / 2)² bracket ([`warm_up_merge`]). Returns the names of
+/// the stages that ran and gave what they should (the circle within 2 % of the drawn one, a
+/// preview of `side`² pixels, statistics that see the sun, a merge of every frame with a fitted
+/// noise model), from [`WARM_UP_STAGES`]. Nothing is kept: the pictures are synthetic and
+/// dropped, and none of the user's photos is read.
+///
+/// Why: the browser's engine optimises a function only once it has spent a budget running
+/// (V8: per function), and a running call keeps the code it started with. After [`warm_up`]'s
+/// 256² merge (once or four times), V8's compile trace of the first 12 MP merge
+/// (`web-tests/profile.mjs --trace`, `tools/wasm_compiles.py`) still showed these stages'
+/// functions being optimised during it: the circle's blur (`Blurred::from_rows`, `blur_row`),
+/// its fit (`kasa_fit`) and sorts, the tone map's statistics (`Acc::add_span`, `log2f`, their
+/// parallel reduction), the bracket checks (`frames_that_inform`), the noise fit's sorts, the
+/// merge's refinement (`Refine::new`), flags and warnings: 24 functions, 130–200 ms of
+/// compiling, the code running in the baseline tier until then. After four rounds on 384²
+/// pictures (0.15–0.25 s each on the 2-core test machine), 9 (20–30 ms), none of these.
+pub fn warm_up_stages(side: usize) -> Result<Vec<&'static str>, WebError> {
+    let mut ran = Vec::with_capacity(WARM_UP_STAGES.len());
+    let half = side as f64 / 2.0;
+    let drawn = 0.45 * side as f64;
+    // A fish-eye photo: a sky disc brightening downwards, a little texture, a dark housing.
+    let mut photo = Vec::with_capacity(3 * side * side);
+    for y in 0..side {
+        for x in 0..side {
+            let d = (x as f64 + 0.5 - half).hypot(y as f64 + 0.5 - half);
+            let t = ((x * 7919 + y * 104_729) % 7) as u8;
+            if d <= drawn {
+                let v = 110 + (100 * y / side) as u8 + t;
+                photo.extend_from_slice(&[v / 2, v.saturating_sub(20), v]);
+            } else {
+                photo.extend_from_slice(&[4 + t, 4 + t, 5 + t]);
+            }
+        }
     }
-    Ok(found)
+    let photo = skydome::image::RgbImage::from_vec(side, side, photo)
+        .ok_or(WebError::Missing("a warm-up photo of the stated size"))?;
+    if let Ok(fit) = skydome::fisheye::detect_circle(&photo) {
+        let c = fit.circle;
+        if (c.cx - half)
+            .abs()
+            .max((c.cy - half).abs())
+            .max((c.r - drawn).abs())
+            <= 0.02 * drawn
+        {
+            ran.push(WARM_UP_STAGES[0]);
+        }
+    }
+    drop(photo);
+    // The dome as a merge crops it: nothing beyond the horizon.
+    let (mut dome, _) = warm_up_dome(side);
+    let horizon = Circle {
+        cx: half,
+        cy: half,
+        r: half,
+    };
+    for (i, px) in dome.data.chunks_exact_mut(3).enumerate() {
+        let (x, y) = ((i % side) as f64 + 0.5, (i / side) as f64 + 0.5);
+        if (x - half).hypot(y - half) > half {
+            px.fill(0.0);
+        }
+    }
+    let preview = skydome::tonemap::tonemap_u8(&dome, &pipeline::default_tonemap(None))
+        .map_err(|e| WebError::Encode(e.to_string()))?;
+    if preview.width == side && preview.height == side {
+        ran.push(WARM_UP_STAGES[1]);
+    }
+    let stats = skydome::tonemap::luminance_stats(&dome, Some(&horizon))
+        .map_err(|e| WebError::Encode(e.to_string()))?;
+    if stats.count > 0 && stats.max >= 1.0e4 {
+        ran.push(WARM_UP_STAGES[2]);
+    }
+    drop(dome);
+    if warm_up_merge(side / 2)? {
+        ran.push(WARM_UP_STAGES[3]);
+    }
+    Ok(ran)
+}
+
+/// The bracket checks, the noise model's fit and the noise-weighted merge of a synthetic
+/// `side`² fish-eye bracket (three 8-bit frames, 2 EV apart, through their true response), as
+/// the pipeline calls them ([`skydome::bracket::assemble`], [`skydome::noise::estimate`],
+/// [`skydome::merge::merge`] with the fitted model, clipping flags, and the merge's warnings).
+/// Returns whether all three frames were kept, the noise model was fitted and the merge gave a
+/// radiance of the bracket's size.
+fn warm_up_merge(side: usize) -> Result<bool, WebError> {
+    use skydome::synth::{generate, SynthOptions};
+    let b = generate(&SynthOptions {
+        width: side,
+        height: side,
+        fisheye: true,
+        jpeg_quality: None,
+        ..SynthOptions::default()
+    })
+    .map_err(|e| WebError::Encode(e.to_string()))?;
+    let n = b.frames.len();
+    let decoded = b
+        .frames
+        .into_iter()
+        .map(|f| DecodedFrame {
+            name: f.name,
+            width: f.width,
+            height: f.height,
+            pixels: f.pixels,
+            exif_time_s: Some(f.exposure.time_s),
+            iso: None,
+            f_number: None,
+            info: CaptureInfo::default(),
+            non_srgb_icc: None,
+        })
+        .collect();
+    let br = skydome::bracket::assemble(decoded, None, Default::default())
+        .map_err(|e| WebError::Pipeline(e.into()))?;
+    let response = skydome::response::Response::from_curves(b.true_g)
+        .map_err(|e| WebError::Encode(e.to_string()))?;
+    let noise = skydome::noise::estimate(&br.frames, &response, 0, None);
+    let merged = skydome::merge::merge(
+        &br.frames,
+        &response,
+        &skydome::merge::MergeOptions {
+            weighting: skydome::merge::Weighting::Noise,
+            clipped_mask: true,
+            noise: Some(noise.model),
+            ..Default::default()
+        },
+    )
+    .map_err(|e| WebError::Encode(e.to_string()))?;
+    merged.warnings(b.circle.as_ref());
+    Ok(br.frames.len() == n
+        && noise.fitted
+        && merged.radiance.width == side
+        && merged.radiance.height == side)
+}
+
+/// [`warm_up_stages`] for the page, on `side`² pictures (0: [`WARM_UP_STAGES_SIDE`]): the
+/// names of the stages that ran (call it [`WARM_UP_STAGES_ROUNDS`] times, each its own idle
+/// step).
+#[wasm_bindgen(js_name = warm_up_stages)]
+pub fn warm_up_stages_js(side: usize) -> Result<Vec<String>, JsError> {
+    let side = if side == 0 { WARM_UP_STAGES_SIDE } else { side };
+    Ok(warm_up_stages(side)?
+        .into_iter()
+        .map(String::from)
+        .collect())
+}
+
+/// [`WARM_UP_STAGES_ROUNDS`] for the page.
+#[wasm_bindgen(js_name = warm_up_stages_rounds)]
+pub fn warm_up_stages_rounds_js() -> usize {
+    WARM_UP_STAGES_ROUNDS
 }
 
 /// Side in pixels of the pictures [`warm_up_decoding`] decodes.
@@ -1156,6 +1343,23 @@ mod tests {
     #[test]
     fn the_sun_warm_up_finds_its_sun() {
         assert!(warm_up_sun(WARM_UP_SUN_SIDE, 1).expect("warm-up"));
+    }
+
+    /// Each stage of the stages' warm-up runs and gives what it should (the lens circle found
+    /// where it was drawn, a preview of the picture's size, statistics that see the sun): if one
+    /// stopped running, or ran a path that fails early, the warm-up would no longer make the
+    /// merge's own code hot, and this fails.
+    #[test]
+    fn the_stages_warm_up_runs_every_stage() {
+        assert_eq!(
+            warm_up_stages(WARM_UP_STAGES_SIDE).expect("warm-up"),
+            WARM_UP_STAGES.to_vec()
+        );
+        // Smaller pictures too (the circle's detection scales with them).
+        assert_eq!(
+            warm_up_stages(256).expect("warm-up"),
+            WARM_UP_STAGES.to_vec()
+        );
     }
 
     #[test]

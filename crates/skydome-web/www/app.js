@@ -92,12 +92,19 @@ const memoryAsked = new URLSearchParams(location.search).get('memory');
 // `?reserve=MiB` sets how much memory the core reserves while idle for the first merge (the
 // worker's default: 160 MiB; 0: none).
 const reserveAsked = new URLSearchParams(location.search).get('reserve');
+const pageQuery = new URLSearchParams(location.search);
 
 function startWorker() {
   const url = new URL('./worker.js', import.meta.url);
   if (threadsAsked != null) url.searchParams.set('threads', threadsAsked);
   if (memoryAsked != null) url.searchParams.set('memory', memoryAsked);
   if (reserveAsked != null) url.searchParams.set('reserve', reserveAsked);
+  // The idle warm-up's knobs (worker.js): ?warmup=N 256² merges, ?stages=N rounds of the
+  // stages warm-up, ?stageside=N its pictures' side.
+  for (const name of ['warmup', 'stages', 'stageside']) {
+    const v = pageQuery.get(name);
+    if (v != null) url.searchParams.set(name, v);
+  }
   worker = new Worker(url, { type: 'module' });
   worker.onmessage = (e) => {
     const { id, progress, result, error, kind } = e.data;

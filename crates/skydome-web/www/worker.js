@@ -12,7 +12,8 @@
 // sets the pool's size; 0 forces the single-threaded build.
 
 let Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
-  list_times, decoding_progress, sentence, warm_up, warm_up_decoding, reserve_heap;
+  list_times, decoding_progress, sentence, warm_up, warm_up_decoding, reserve_heap, warm_up_stages,
+  warm_up_stages_rounds;
 /** Which core runs: {build: 'threaded' | 'single', threads, reason} (reason: why single). */
 let coreInfo = null;
 
@@ -66,7 +67,8 @@ let memoryRef = null;
 const ready = loadCore().then(({ m, wasm, info }) => {
   ({
     Job, detect_circle, photo_exposure, photo_metadata, check_camera_profile, check_lens_profile, live_overlay,
-    list_times, decoding_progress, sentence, warm_up, warm_up_decoding, reserve_heap,
+    list_times, decoding_progress, sentence, warm_up, warm_up_decoding, reserve_heap, warm_up_stages,
+    warm_up_stages_rounds,
   } = m);
   coreInfo = info;
   memoryRef = wasm.memory || null;
@@ -91,9 +93,18 @@ const ready = loadCore().then(({ m, wasm, info }) => {
 //   hardly help: after the decoding warm-up, 22 functions were still optimised during the first
 //   12 MP merge with one 256² merge, 21 with three (the sun search, called once per merge, and
 //   small helpers). So warm_up also runs the sun search 8 times on a 512² dome
-//   (skydome_web::warm_up_sun).
+//   (skydome_web::warm_up_sun);
+// - it runs, in `?stages=N` steps (default skydome_web::warm_up_stages_rounds(), 4; 0.15–0.25 s
+//   each on the test machine), the stages a merge calls once over a whole picture, on 384²
+//   synthetic pictures (`?stageside=N` on this worker's URL; skydome_web::warm_up_stages: the
+//   lens circle's detection, the preview's tone map, the sky's statistics, the bracket checks,
+//   the noise fit and the merge): after one 256² merge, or four, V8 still optimised 24 of their
+//   functions during the first 12 MP merge (web-tests/profile.mjs --trace), after these steps
+//   about 9. Each step reports the stages it ran (`warmUp` below, for the tests).
 const reserveMiB = countParam('reserve', 160);
 const warmUps = countParam('warmup', 1);
+/** The stages each `warm_up_stages` step ran, in order (for web-tests). */
+const warmUpStages = [];
 let merged = false;
 /** Milliseconds each idle step took, in order (for web-tests/measure.mjs). */
 const idleMs = [];
@@ -114,6 +125,9 @@ ready.then(() => setTimeout(() => {
       if (reserveMiB > 0 && reserve_heap(reserveMiB) === 0) console.warn(`could not reserve ${reserveMiB} MiB for the first merge`);
     },
     ...Array.from({ length: warmUps }, () => () => warm_up(256)),
+    ...Array.from({ length: countParam('stages', warm_up_stages_rounds()) }, () => () => {
+      warmUpStages.push(warm_up_stages(countParam('stageside', 0)));
+    }),
   ]);
 }, 0)).catch(() => {}); // a core that fails to load is reported by the first request
 let photos = null;   // the photos of the current bracket as files (kept for a second run, e.g. a tapped sun)
@@ -348,7 +362,7 @@ const handlers = {
   async sentence({ text }) { return sentence(text); },
   async core() { return coreInfo; },
   // What the idle warm-up did: milliseconds per step (decoding, the reservation, each 256² merge).
-  async warmUp() { return { ms: idleMs }; },
+  async warmUp() { return { ms: idleMs, stages: warmUpStages }; },
   async memory() {
     // The wasm linear memory never shrinks: its size is the high-water mark of the core.
     return { wasmBytes: wasmMemory() };
