@@ -85,6 +85,29 @@ def test_profile_from_calibrate_matches_the_cli_camera_json(cli, tmp_path):
     ]
 
 
+def test_calibrate_methods_match_the_cli_on_a_five_frame_bracket(cli, tmp_path):
+    # From five frames the default ("auto") is the covering calibration (2000 samples), as the
+    # command line's; "robust" is the grid calibration at every count (about 100).
+    run_cli(cli, "synth", "--size", 256, "--evs=-2,-1,0,1,2", "-o", tmp_path)
+    frames = [str(tmp_path / f"frame_{k}.jpg") for k in range(5)]
+    listed = dict(
+        line.split()[:2]
+        for line in (tmp_path / "times.txt").read_text().splitlines()
+        if line and not line.startswith("#")
+    )
+    times = [float(listed[f"frame_{k}.jpg"]) for k in range(5)]
+    t = ",".join(map(str, times))
+    samples = {}
+    for method in ("auto", "robust", "covering"):
+        cam = tmp_path / f"cam_{method}.json"
+        run_cli(cli, "calibrate", *frames, "--times", t, "--method", method, "-o", cam)
+        profile = skydome.calibrate(frames, times, method=method)
+        assert profile.to_json() == cam.read_text(), method
+        samples[method] = json.loads(cam.read_text())["samples"]
+    assert skydome.calibrate(frames, times).to_json() == (tmp_path / "cam_auto.json").read_text()
+    assert samples["auto"] == samples["covering"] >= 2000 > 4 * samples["robust"]
+
+
 def test_measured_exposures_match_the_cli(cli, tmp_path):
     # The demo bracket with its first frame's time listed a stop long, on the camera profile
     # made from the right times: the check names the frame, and exposures="measured" merges
