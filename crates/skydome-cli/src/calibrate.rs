@@ -19,8 +19,9 @@ const CODE_BANDS_DEFAULT: usize = 16;
 /// How calibration samples and the solve are chosen (shared by `calibrate` and `merge`).
 #[derive(Debug, Clone, clap::Args)]
 pub struct CalibArgs {
-    /// Number of sample pixels N (default 100; 2000 with --method noise; raised automatically so
-    /// that N·(frames−1) ≥ 255 unless --method seed).
+    /// Number of sample pixels N (default 100; 2000 with --method noise or covering, and so with
+    /// the default --method auto from 5 frames; raised automatically so that N·(frames−1) ≥ 255
+    /// unless --method seed).
     #[arg(long)]
     pub samples: Option<usize>,
     /// Grid size G: with --method seed or --stratify 0, samples are drawn in G×G cells over the
@@ -53,7 +54,8 @@ pub struct CalibArgs {
     /// `auto` (default) is `covering` for brackets of 5 frames or more and `robust` for fewer
     /// (the better of the two at each count on synthetic brackets with a known truth, see
     /// docs/accuracy.md); given --samples, --stratify, --fit, --lambda, --hat-margin, --grid or
-    /// --code-bands it is `robust` at every count, those options applied.
+    /// --code-bands it is `robust` at every count, those options applied, and so it is with
+    /// `merge --exposures measured` (measuring alternates with the fit).
     /// `robust` rejects clipped, edge and non-monotonic samples and raises N; `noise` is robust
     /// with 2000 samples stratified over the middle frame's codes and the noise-weighted fit
     /// (λ 100); `covering` is the noise-weighted fit on 2000 samples spread over 16 code bands of
