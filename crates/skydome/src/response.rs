@@ -608,7 +608,8 @@ pub fn calibrate_samples_with(
         log_times,
         opts.lambda,
         opts.solver,
-        (opts.fit, cut),
+        opts.fit,
+        cut,
         m,
     )
 }
@@ -621,24 +622,18 @@ pub fn calibrate_samples_fit(
     solver: Solver,
     fit: Fit,
 ) -> Result<Calibration, ResponseError> {
-    solve_all(
-        samples,
-        log_times,
-        lambda,
-        solver,
-        (fit, OUTLIER_SIGMAS),
-        0.0,
-    )
+    solve_all(samples, log_times, lambda, solver, fit, OUTLIER_SIGMAS, 0.0)
 }
 
 /// [`calibrate_samples_fit`] with the hat's ends moved in by `margin` codes ([`hat_margin`])
-/// and the noise-weighted fit's outlier cut given (`fit.1`, standard deviations).
+/// and the noise-weighted fit's outlier cut given (`cut`, standard deviations).
 fn solve_all(
     samples: Samples,
     log_times: &[f64],
     lambda: f64,
     solver: Solver,
-    (fit, cut): (Fit, f64),
+    fit: Fit,
+    cut: f64,
     margin: f64,
 ) -> Result<Calibration, ResponseError> {
     check_lambda(lambda)?;
