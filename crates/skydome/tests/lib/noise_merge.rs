@@ -993,7 +993,8 @@ fn a_profiles_noise_model_is_scaled_to_the_brackets_iso() {
 const OPENCV_ALIGNED_BANTERLE: [f64; 3] = [0.0844, 0.0648, 0.0744];
 
 /// Tuning bench (issue 27, fifth round): per real set, the frame consistency of the default,
-/// covering and `join` (covering above code 96, the default's toe below) calibrations and of
+/// covering and `join` (covering above code 96, the grid calibration's toe below; another join
+/// with `SKYDOME_ORACLE_JOIN` as in `oracle::calibration_candidates`) calibrations and of
 /// the candidates in `SKYDOME_ORACLE_CANDIDATES` (as `oracle::calibration_candidates`), merged
 /// with the noise model (`SKYDOME_REAL_HAT=1`: the hat), against OpenCV's. With
 /// `SKYDOME_REAL_ALIGN=1` the hand-held banterle_alignment is aligned first
@@ -1040,13 +1041,10 @@ fn real_sets_calibration_choices() {
             };
             if which == "join" {
                 let def = calibrate(&merged_frames, None, &CalibrateOptions::robust()).unwrap();
+                let (a, b) = crate::oracle::join_spec().unwrap_or((96, 96));
                 let mut jc = response.curves().clone();
                 for (ch, curve) in jc.iter_mut().enumerate() {
-                    let grid = &def.response.curves()[ch];
-                    let shift = curve[96] - grid[96];
-                    for z in 0..96 {
-                        curve[z] = grid[z] + shift;
-                    }
+                    *curve = crate::oracle::join_toe(curve, &def.response.curves()[ch], a, b);
                 }
                 response = skydome::response::Response::from_curves(jc).unwrap();
             }

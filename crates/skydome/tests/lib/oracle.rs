@@ -846,6 +846,38 @@ fn bench_selection() -> (Vec<u64>, bool, Vec<usize>) {
     (seeds, wide, ns)
 }
 
+/// The toe join of the tuning benches, `SKYDOME_ORACLE_JOIN`: `z` (a hard join at code `z`)
+/// or `a-b` (a blend from code `a` to `b`), as `(a, b)` within `0..=255`.
+pub fn join_spec() -> Option<(usize, usize)> {
+    let v = std::env::var("SKYDOME_ORACLE_JOIN").ok()?;
+    let v = v.trim();
+    let (a, b) = match v.split_once('-') {
+        Some((a, b)) => (a.trim().parse().ok()?, b.trim().parse().ok()?),
+        None => {
+            let z = v.parse().ok()?;
+            (z, z)
+        }
+    };
+    Some((usize::min(a, 255), usize::min(b, 255)))
+}
+
+/// `curve` with the toe of `toe` (one channel, 256 entries): the slopes `g(z+1) − g(z)` are
+/// `toe`'s below code `a`, `curve`'s from `b` up, blended linearly between (`a == b`: `toe`
+/// below `a`, shifted to meet `curve` there); `curve`'s values from `b` up are kept.
+pub fn join_toe(curve: &[f64], toe: &[f64], a: usize, b: usize) -> Vec<f64> {
+    let mut out = curve.to_vec();
+    for z in (0..b).rev() {
+        let w = if z < a {
+            0.0
+        } else {
+            (z - a) as f64 / (b - a) as f64
+        };
+        let slope = w * (curve[z + 1] - curve[z]) + (1.0 - w) * (toe[z + 1] - toe[z]);
+        out[z] = out[z + 1] - slope;
+    }
+    out
+}
+
 /// Tuning bench: every candidate calibration with the noise merge against the oracle and against
 /// the default calibration (noise merge and hat merge), per bracket: sky ratio, dim ground,
 /// clipped sun and the curve's toe/top errors. Seeds from `SKYDOME_ORACLE_SEEDS` (comma
@@ -856,7 +888,9 @@ fn bench_selection() -> (Vec<u64>, bool, Vec<usize>) {
 /// instead where that curve's [`toe_consistency`] on the candidate's samples is more than `r`
 /// times better (a data-driven choice; both values printed). With `SKYDOME_ORACLE_JOIN=z` every
 /// candidate's curve below code `z` is the default calibration's, shifted to meet it at `z` (a
-/// fallback toe; docs/accuracy.md, third round). A minute or two:
+/// fallback toe; docs/accuracy.md, third round); with `SKYDOME_ORACLE_JOIN=a-b` the slopes
+/// `g(z+1) − g(z)` pass linearly from the default's below code `a` to the candidate's from `b`
+/// up (seventh round). A minute or two:
 /// `SKYDOME_ORACLE_CANDIDATES="cover=16,lo=1,lambda=150" cargo test --workspace --test lib --
 /// --ignored oracle::calibration_candidates --nocapture`.
 #[test]
@@ -937,17 +971,10 @@ fn calibration_candidates() {
                     }
                     cal.response = skydome::response::Response::from_curves(curves).unwrap();
                 }
-                let join: Option<usize> = std::env::var("SKYDOME_ORACLE_JOIN")
-                    .ok()
-                    .and_then(|v| v.trim().parse().ok());
-                if let Some(zj) = join.map(|z| z.min(255)) {
+                if let Some((za, zb)) = join_spec() {
                     let mut curves = cal.response.curves().clone();
                     for (ch, curve) in curves.iter_mut().enumerate() {
-                        let grid = &def.response.curves()[ch];
-                        let shift = curve[zj] - grid[zj];
-                        for z in 0..zj {
-                            curve[z] = grid[z] + shift;
-                        }
+                        *curve = join_toe(curve, &def.response.curves()[ch], za, zb);
                     }
                     cal.response = skydome::response::Response::from_curves(curves).unwrap();
                 }
