@@ -214,6 +214,10 @@ pub struct Args {
 #[derive(Serialize)]
 struct Report<'a> {
     profile: String,
+    /// The calibration used, as `--method` names it, `auto` resolved for the frame count
+    /// (absent with `--linear`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    calibration: Option<String>,
     sampling: Option<&'a skydome::sampling::SampleReport>,
     monotonic_fixes: Option<[usize; 3]>,
     alignment: Option<skydome::align::Alignment>,
@@ -244,6 +248,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     let mut outputs = Outputs::default();
     let mut report = Report {
         profile: a.output.display().to_string(),
+        calibration: None,
         sampling: None,
         monotonic_fixes: None,
         alignment,
@@ -260,6 +265,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
         calibration =
             response::calibrate(&br.frames, a.calib.circle, &opts).context("calibration failed")?;
         report.sampling = Some(calibration.report());
+        report.calibration = Some(opts.for_frames(br.frames.len()).method_name());
         if let Some(w) = calibration.report().relaxed_warning() {
             io::warn(quiet, &w);
         }
@@ -324,6 +330,9 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
 }
 
 fn print_report(r: &Report) {
+    if let Some(m) = &r.calibration {
+        crate::out(&format!("calibration: {m}"));
+    }
     if let Some(s) = r.sampling {
         let raised = if s.target > s.requested {
             format!(" (raised from {} so that N·(frames−1) ≥ 255)", s.requested)

@@ -351,8 +351,13 @@ fn encode(a: &Args, dome: &Dome) -> Result<Outputs> {
 /// The human-readable summary.
 fn print_summary(r: &Report, written: &[String]) {
     let times: Vec<String> = r.frames.iter().map(|f| format_time(f.time_s)).collect();
+    let method = r
+        .calibration
+        .as_ref()
+        .map(|m| format!(" ({m} calibration)"))
+        .unwrap_or_default();
     crate::out(&format!(
-        "merged {} frames ({}) {}x{}, response {}",
+        "merged {} frames ({}) {}x{}, response {}{method}",
         r.frames.len(),
         times.join(", "),
         r.width,

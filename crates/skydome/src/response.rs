@@ -366,6 +366,42 @@ impl CalibrateOptions {
         }
     }
 
+    /// The name `skydome calibrate --method` gives these options: `auto` while
+    /// [`CalibrateOptions::covering_from`] is set (resolve it with
+    /// [`CalibrateOptions::for_frames`] first); else the method whose draw these options use —
+    /// `colour-hdri` (histogram samples), `seed` (no rejections), `covering` (the covering
+    /// draw), `noise` (the stratified draw) or `robust` (the grid draw) — followed by
+    /// ` (options changed)` unless every option is that method's (the sample seed and solver
+    /// may differ; the seed method's sample count, grid and λ too).
+    pub fn method_name(&self) -> String {
+        if self.covering_from.is_some() {
+            return "auto".into();
+        }
+        let s = &self.sampling;
+        let (name, named) = if s.histogram {
+            ("colour-hdri", Self::colour_hdri())
+        } else if !s.reject {
+            (
+                "seed",
+                Self::seed_method(s.samples, s.grid, s.seed, self.lambda, self.solver),
+            )
+        } else if s.cover > 0 {
+            ("covering", Self::covering())
+        } else if s.stratify > 0 {
+            ("noise", Self::noise_fit())
+        } else {
+            ("robust", Self::robust())
+        };
+        let mut n = named;
+        n.sampling.seed = s.seed;
+        n.solver = self.solver;
+        if n == *self {
+            name.into()
+        } else {
+            format!("{name} (options changed)")
+        }
+    }
+
     /// The calibration that uses the data (issue 27): 2000 samples stratified over the middle
     /// frame's codes ([`SampleOptions::stratified`]), the noise-weighted fit ([`Fit::Noise`]),
     /// λ = [`NOISE_FIT_LAMBDA`]. `skydome calibrate --method noise`.

@@ -265,6 +265,7 @@ pub fn run(
         frames: br.frames.iter().map(FrameSummary::of).collect(),
         exposures: calibrated.exposures,
         response: calibrated.from.to_string(),
+        calibration: calibrated.method,
         sampling: calibrated.sampling,
         clipped_high_pixels: merged.clipped_high,
         clipped_low_pixels: merged.clipped_low,
@@ -335,6 +336,9 @@ struct Calibrated {
     profile: Option<CameraProfile>,
     /// What calibration sampling did.
     sampling: Option<SampleReport>,
+    /// The calibration's method name ([`response::CalibrateOptions::method_name`]), when it
+    /// calibrated.
+    method: Option<String>,
     /// Where the response came from, for the report.
     from: &'static str,
     warnings: Vec<String>,
@@ -355,6 +359,7 @@ fn linear_response(exposures: ExposureSource) -> Calibrated {
         response: Response::linear(),
         profile: None,
         sampling: None,
+        method: None,
         from: "linear (RAW)",
         warnings,
         exposures: None,
@@ -387,12 +392,14 @@ fn response_stage(
             response: prof.response()?,
             profile: None,
             sampling: None,
+            method: None,
             from: "profile",
             warnings: Vec::new(),
             exposures: None,
         },
         (ResponseSource::Calibrate(o), ExposureSource::Listed) => {
-            calibrated_on(response::calibrate(&br.frames, circle, o)?, br)
+            let name = o.for_frames(br.frames.len()).method_name();
+            calibrated_on(response::calibrate(&br.frames, circle, o)?, br, name)
         }
         (ResponseSource::Profile(prof), ExposureSource::Measured) => {
             let response = prof.response()?;
@@ -401,6 +408,7 @@ fn response_stage(
                 response,
                 profile: None,
                 sampling: None,
+                method: None,
                 from: "profile",
                 warnings: Vec::new(),
                 exposures: None,
@@ -411,7 +419,7 @@ fn response_stage(
         (ResponseSource::Calibrate(o), ExposureSource::Measured) => {
             let (cal, m, rounds) =
                 exposures::calibrate_measuring(&mut br.frames, same, circle, o, black)?;
-            let mut c = calibrated_on(cal, br);
+            let mut c = calibrated_on(cal, br, exposures::measuring_options(o).method_name());
             measured_into(&mut c, br, &m, rounds);
             c
         }
@@ -431,7 +439,7 @@ fn measured_into(c: &mut Calibrated, br: &mut Bracket, m: &exposures::Measuremen
 
 /// What a calibration on this bracket gives the run: its response, the profile made from it
 /// (described from the bracket's EXIF), the sampling report and its warnings.
-fn calibrated_on(cal: response::Calibration, br: &Bracket) -> Calibrated {
+fn calibrated_on(cal: response::Calibration, br: &Bracket, method: String) -> Calibrated {
     let sampling = cal.report().clone();
     let warnings = [
         sampling.relaxed_warning(),
@@ -445,6 +453,7 @@ fn calibrated_on(cal: response::Calibration, br: &Bracket) -> Calibrated {
         profile: Some(profile),
         warnings: warnings.into_iter().flatten().collect(),
         sampling: Some(sampling),
+        method: Some(method),
         from: "calibrated on this bracket",
         exposures: None,
     }

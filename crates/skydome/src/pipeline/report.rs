@@ -47,6 +47,12 @@ pub struct Report {
     pub exposures: Option<ExposureReport>,
     /// Where the response came from: "profile" or "calibrated on this bracket".
     pub response: String,
+    /// The calibration used on this bracket, as `skydome calibrate --method` names it
+    /// ([`crate::response::CalibrateOptions::method_name`]), with the default's `auto`
+    /// resolved for the bracket's frame count (`covering` from five frames, `robust` below),
+    /// when it calibrated.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<String>,
     /// What calibration sampling did, when it calibrated.
     pub sampling: Option<SampleReport>,
     /// Pixels clipped even in the shortest exposure (a lower bound).

@@ -302,6 +302,7 @@ pub(super) fn intake(
                     response: r,
                     profile: None,
                     sampling: None,
+                    method: None,
                     from: "profile",
                     warnings: Vec::new(),
                     exposures: None,
@@ -337,7 +338,7 @@ pub(super) fn intake(
             };
             drop(gathered);
             match response::calibrate_with_samples(&br.frames, samples, &o) {
-                Ok(cal) => calibrated_on(cal, &br),
+                Ok(cal) => calibrated_on(cal, &br, o.method_name()),
                 Err(_) => return Ok(None),
             }
         }

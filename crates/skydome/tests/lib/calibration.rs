@@ -602,3 +602,54 @@ fn held_out_residuals_tell_a_wrong_toe() {
     println!("toe median |residual|: true {t:.4}, bent {b:.4}");
     assert!(t < 0.05 && b > 0.2, "true {t}, bent {b}");
 }
+
+/// The report's calibration name (`CalibrateOptions::method_name`): every named method's own
+/// name whatever its sample seed and solver, `auto` until resolved for a frame count (the
+/// covering calibration from five frames, robust below; robust again with measured
+/// exposures), and a changed option said.
+#[test]
+fn every_calibration_method_has_its_command_line_name() {
+    use skydome::exposures::measuring_options;
+    use skydome::response::Solver;
+    let named = [
+        (CalibrateOptions::robust(), "robust"),
+        (CalibrateOptions::noise_fit(), "noise"),
+        (CalibrateOptions::covering(), "covering"),
+        (CalibrateOptions::colour_hdri(), "colour-hdri"),
+        (
+            CalibrateOptions::seed_method(70, 7, 3, 10.0, Solver::DenseSvd),
+            "seed",
+        ),
+    ];
+    for (o, name) in named {
+        assert_eq!(o.method_name(), name);
+        let mut other = o.clone();
+        other.sampling.seed = 99;
+        other.solver = Solver::DenseSvd;
+        assert_eq!(other.method_name(), name);
+        let changed = CalibrateOptions {
+            outlier_sigmas: 7.0,
+            ..o
+        };
+        assert_eq!(changed.method_name(), format!("{name} (options changed)"));
+    }
+    let auto = CalibrateOptions::default();
+    assert_eq!(auto.method_name(), "auto");
+    for (frames, name) in [
+        (2, "robust"),
+        (3, "robust"),
+        (4, "robust"),
+        (5, "covering"),
+        (9, "covering"),
+    ] {
+        assert_eq!(
+            auto.for_frames(frames).method_name(),
+            name,
+            "{frames} frames"
+        );
+        assert_eq!(
+            measuring_options(&auto).for_frames(frames).method_name(),
+            "robust"
+        );
+    }
+}
