@@ -8,7 +8,10 @@
 //   cargo build --release --target wasm32-unknown-unknown \
 //     && cp target/wasm32-unknown-unknown/release/merge_check.wasm /tmp/scalar.wasm
 //   node run.mjs /tmp/simd.wasm /tmp/scalar.wasm
-// Prints the cases that differ and exits 1 if any does. (A kernel sabotaged by one constant of
+// Prints the cases that differ and exits 1 if any does. With `--time ROUNDS [P W H]` it also
+// times the merge of P random frames of W × H (default 3, 2000 × 1500) in both builds, one call
+// of each in turn, ROUNDS times (one thread: the check is built without rayon), and prints the
+// medians and the median of the paired ratios A / B. (A kernel sabotaged by one constant of
 // its `2^x` made 72 of the 80 cases differ: every one with 1–9 frames.)
 import fs from 'node:fs';
 
@@ -39,4 +42,22 @@ for (let p = 1; p <= 10; p++) {
   }
 }
 console.log(`${cases - differ} of ${cases} merges give the same bits`);
+const ti = process.argv.indexOf('--time');
+if (ti > 0) {
+  const rest = process.argv.slice(ti + 1).map(Number);
+  const rounds = rest[0];
+  const fixed = rest.length >= 4 ? rest.slice(1, 4) : [3, 2000, 1500];
+  for (const m of [a, b]) m.prepare(...fixed);
+  const times = [[], []];
+  const median = (xs) => [...xs].sort((x, y) => x - y)[xs.length >> 1];
+  for (let r = 0; r < rounds; r++) {
+    for (const [k, m] of [[0, a], [1, b]]) {
+      const t0 = performance.now();
+      const d = m.merge_prepared();
+      times[k].push(performance.now() - t0);
+      if (d === 0n) throw new Error('a merge failed');
+    }
+  }
+  console.log(`${fixed[0]} frames of ${fixed[1]} × ${fixed[2]}, ${rounds} rounds: A ${median(times[0]).toFixed(1)} ms, B ${median(times[1]).toFixed(1)} ms, paired A / B ${median(times[0].map((t, i) => t / times[1][i])).toFixed(3)}`);
+}
 process.exit(differ ? 1 : 0);
