@@ -25,6 +25,22 @@ pub(crate) fn max(a: f32, b: f32) -> f32 {
     }
 }
 
+/// `a.min(b)` the way [`max`] is `a.max(b)`: on wasm32 a compare and a select (`b` when `a` is
+/// NaN, NaN when only `b` is, so callers pass a possible NaN as `a`) instead of a call to
+/// `fminf` per sample; elsewhere `f32::min`. Of two zeros either may come back.
+#[inline(always)]
+pub(crate) fn min(a: f32, b: f32) -> f32 {
+    if cfg!(target_arch = "wasm32") {
+        if a < b {
+            a
+        } else {
+            b
+        }
+    } else {
+        a.min(b)
+    }
+}
+
 /// `log₂ x` for positive, finite, **normal** `x`: the exponent from the bits and `log₂ m` of the
 /// mantissa `m ∈ [1, 2)` by a degree-6 least-squares polynomial; absolute error below 3·10⁻⁶
 /// plus the `f32` rounding of the sum (half an ulp of `|log₂ x|`, up to 4·10⁻⁶ at the ends).

@@ -1,5 +1,8 @@
 //! The noise-aware merge of 8-bit frames in one vector sweep: the hat's estimate and its
-//! refinement ([`Refine`]) for eight samples at a time, with AVX2, chosen at run time (`is_x86_feature_detected!`). It gives the same bits as the
+//! refinement ([`Refine`]) for eight samples at a time with AVX2, chosen at run time
+//! (`is_x86_feature_detected!`), or four at a time with WebAssembly's SIMD128 when the module
+//! is built with it (the app's builds are; wasm has no run-time detection, so it is chosen at
+//! compile time). It gives the same bits as the
 //! scalar path ([`merge_band`](super::hat)'s hat pass, then [`refine_row`](super::refine)):
 //! the same `f32` operations in the same order on every sample, no fused multiply-add.
 //!
@@ -17,8 +20,15 @@
 //! path's tables for every frame, channel and code and declines (the scalar path runs) on any
 //! difference — a weighting this kernel does not know can never change a result.
 
-// Beyond x86-64 `Fused::new` always declines, and the tables it would fill are never read.
-#![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+// Beyond x86-64 and wasm32 with SIMD128 `Fused::new` always declines, and the tables it would
+// fill are never read.
+#![cfg_attr(
+    not(any(
+        target_arch = "x86_64",
+        all(target_arch = "wasm32", target_feature = "simd128")
+    )),
+    allow(dead_code)
+)]
 
 use super::refine::Refine;
 
@@ -42,7 +52,8 @@ pub(super) struct Fused {
 
 impl Fused {
     /// The kernel's tables for the refinement `r` of 8-bit frames whose hat pass uses `hat`
-    /// (per frame, channel and code `[w, w · log2 E_j]`), or `None` when the CPU has no AVX2,
+    /// (per frame, channel and code `[w, w · log2 E_j]`), or `None` when the CPU has no AVX2
+    /// (or the wasm module no SIMD128),
     /// the input is not 8-bit, the frame count is beyond [`MAX_FRAMES`], or the kernel's
     /// arithmetic would give any weight other than the tables' (see the module docs).
     pub(super) fn new<const N: usize>(
@@ -99,7 +110,14 @@ impl Fused {
             // SAFETY: `Fused` exists only where `available()` found AVX2 on this CPU.
             unsafe { avx2::row(self, rows, out) }
         }
-        #[cfg(not(target_arch = "x86_64"))]
+        #[cfg(all(target_arch = "wasm32", target_feature = "simd128"))]
+        {
+            simd128::row(self, rows, out)
+        }
+        #[cfg(not(any(
+            target_arch = "x86_64",
+            all(target_arch = "wasm32", target_feature = "simd128")
+        )))]
         {
             let _ = out;
             0
@@ -133,7 +151,14 @@ fn available() -> bool {
     {
         std::arch::is_x86_feature_detected!("avx2")
     }
-    #[cfg(not(target_arch = "x86_64"))]
+    #[cfg(all(target_arch = "wasm32", target_feature = "simd128"))]
+    {
+        true
+    }
+    #[cfg(not(any(
+        target_arch = "x86_64",
+        all(target_arch = "wasm32", target_feature = "simd128")
+    )))]
     {
         false
     }
@@ -427,6 +452,281 @@ mod avx2 {
         let p = _mm256_add_ps(c[0], _mm256_mul_ps(f, p));
         let scale = _mm256_slli_epi32::<23>(_mm256_add_epi32(k, _mm256_set1_epi32(127)));
         _mm256_mul_ps(p, _mm256_castsi256_ps(scale))
+    }
+}
+
+#[cfg(all(target_arch = "wasm32", target_feature = "simd128"))]
+mod simd128 {
+    //! The kernel of the `avx2` module for WebAssembly's SIMD128: four samples a vector, the
+    //! same operations in the same order (wasm has no fused multiply-add without
+    //! relaxed-simd, which is not enabled). Where the instructions differ the NaN rules are
+    //! matched: `f32x4.pmax(a, b)` is `if a < b { b } else { a }` and `pmin(a, b)` is
+    //! `if b < a { b } else { a }`, exactly the selects of `floor_bin` and `f32::clamp`.
+    use super::{Fused, MAX_FRAMES, STEP};
+    use crate::fastmath::{EXP2_C, EXP2_LIMIT, EXP2_MAGIC};
+    use core::arch::wasm32::*;
+
+    /// [`Fused::row`] for SIMD128.
+    pub(super) fn row(k: &Fused, rows: &[&[u8]], out: &mut [f32]) -> usize {
+        match rows.len() {
+            1 => run::<1>(k, rows, out),
+            2 => run::<2>(k, rows, out),
+            3 => run::<3>(k, rows, out),
+            4 => run::<4>(k, rows, out),
+            5 => run::<5>(k, rows, out),
+            6 => run::<6>(k, rows, out),
+            7 => run::<7>(k, rows, out),
+            8 => run::<8>(k, rows, out),
+            9 => run::<9>(k, rows, out),
+            _ => 0,
+        }
+    }
+
+    /// The kernel for `P` frames: as `avx2::run`, in blocks of vectors, the hat stage of
+    /// every vector of a block and then every vector's refinement.
+    #[inline]
+    fn run<const P: usize>(k: &Fused, rows: &[&[u8]], out: &mut [f32]) -> usize {
+        const { assert!(P <= MAX_FRAMES) };
+        let n = rows.iter().map(|r| r.len()).fold(out.len(), usize::min) / STEP * STEP;
+        let codes: [&[u8]; P] = std::array::from_fn(|j| &rows[j][..n]);
+        let out = &mut out[..n];
+        let consts = Consts::new::<P>(k);
+        let zero = f32x4_splat(0.0);
+        let wrows = k.rows.as_ptr();
+        // Vectors per block, a multiple of three (a block starts where a step's channels do).
+        const BLOCK: usize = 12;
+        let mut e0s = [zero; BLOCK];
+        let mut bases = [zero; BLOCK];
+        let mut vs = [[zero; P]; BLOCK];
+        let mut fs = [[zero; P]; BLOCK];
+        let mut s0 = 0;
+        while s0 < n {
+            // `s0` and `n` are multiples of STEP (24 = six vectors), so `count` is a multiple
+            // of three and each third of three vectors has its lanes' channels fixed.
+            let count = ((n - s0) / 4).min(BLOCK);
+            debug_assert!(s0.is_multiple_of(STEP) && count.is_multiple_of(3));
+            let mut v = 0;
+            while v < count {
+                let s = s0 + 4 * v;
+                let c = &consts;
+                // SAFETY: `s + 12 ≤ n`, every frame's row length (`count` vectors remain).
+                unsafe {
+                    (e0s[v], bases[v]) = hat_stage::<P, 0>(k, &codes, s, c, &mut vs[v], &mut fs[v]);
+                    (e0s[v + 1], bases[v + 1]) =
+                        hat_stage::<P, 1>(k, &codes, s + 4, c, &mut vs[v + 1], &mut fs[v + 1]);
+                    (e0s[v + 2], bases[v + 2]) =
+                        hat_stage::<P, 2>(k, &codes, s + 8, c, &mut vs[v + 2], &mut fs[v + 2]);
+                }
+                v += 3;
+            }
+            for v in 0..count {
+                let s = s0 + 4 * v;
+                // Every frame's weight for the 4 samples: four frames at a time by one 16-byte
+                // load a sample and a 4 × 4 transpose.
+                let bv = bases[v];
+                let b = [
+                    i32x4_extract_lane::<0>(bv) as usize,
+                    i32x4_extract_lane::<1>(bv) as usize,
+                    i32x4_extract_lane::<2>(bv) as usize,
+                    i32x4_extract_lane::<3>(bv) as usize,
+                ];
+                let mut wrow = [zero; P];
+                for (g, cols) in wrow.chunks_mut(4).enumerate() {
+                    // SAFETY: 0 ≤ base ≤ (rows.len() − 3) − P (clamped in `hat_stage`), and the
+                    // values read are `base + 4 g ..= base + 4 g + 3 ≤ base + P + 2` (`4 g < P`).
+                    let ld = |i: usize| unsafe {
+                        wrows.add(b[i] + 4 * g).cast::<v128>().read_unaligned()
+                    };
+                    let (r0, r1, r2, r3) = (ld(0), ld(1), ld(2), ld(3));
+                    let (t0, t1) = (
+                        i32x4_shuffle::<0, 4, 1, 5>(r0, r1),
+                        i32x4_shuffle::<2, 6, 3, 7>(r0, r1),
+                    );
+                    let (t2, t3) = (
+                        i32x4_shuffle::<0, 4, 1, 5>(r2, r3),
+                        i32x4_shuffle::<2, 6, 3, 7>(r2, r3),
+                    );
+                    let all = [
+                        i64x2_shuffle::<0, 2>(t0, t2),
+                        i64x2_shuffle::<1, 3>(t0, t2),
+                        i64x2_shuffle::<0, 2>(t1, t3),
+                        i64x2_shuffle::<1, 3>(t1, t3),
+                    ];
+                    let m = cols.len();
+                    cols.copy_from_slice(&all[..m]);
+                }
+                let (mut n2, mut d2) = (zero, zero);
+                for j in 0..P {
+                    let wt = f32x4_mul(fs[v][j], wrow[j]);
+                    n2 = f32x4_add(n2, f32x4_mul(wt, vs[v][j]));
+                    d2 = f32x4_add(d2, wt);
+                }
+                // `refined`: the refined value where some frame voted and E₀ is a number.
+                let e0 = e0s[v];
+                let x = f32x4_div(n2, d2);
+                let ok = v128_and(f32x4_gt(d2, zero), f32x4_eq(e0, e0));
+                let r = exp2(v128_bitselect(x, e0, ok));
+                let o = &mut out[s..s + 4];
+                // SAFETY: `o` is 4 writable `f32`s.
+                unsafe { o.as_mut_ptr().cast::<v128>().write_unaligned(r) };
+            }
+            s0 += 4 * count;
+        }
+        n
+    }
+
+    /// Per lane of each of the three vectors of twelve samples (its third `q`): its
+    /// channel's constants.
+    struct Consts {
+        start: [v128; 3],
+        off: [v128; 3],
+        last: [v128; 3],
+        /// The last row's first entry: every row index is clamped to `0 ..= max_base`.
+        max_base: v128,
+    }
+
+    impl Consts {
+        fn new<const P: usize>(k: &Fused) -> Self {
+            let lane = |q: usize, f: &dyn Fn(usize) -> i32| {
+                let v: [i32; 4] = std::array::from_fn(|l| f((4 * q + l) % 3));
+                i32x4(v[0], v[1], v[2], v[3])
+            };
+            let lane_f = |q: usize, f: &dyn Fn(usize) -> f32| {
+                let v: [f32; 4] = std::array::from_fn(|l| f((4 * q + l) % 3));
+                f32x4(v[0], v[1], v[2], v[3])
+            };
+            Self {
+                start: std::array::from_fn(|q| lane(q, &|c| k.start[c])),
+                off: std::array::from_fn(|q| lane_f(q, &|c| k.off[c])),
+                last: std::array::from_fn(|q| lane_f(q, &|c| k.last[c])),
+                max_base: i32x4_splat((k.rows.len() - 3 - P) as i32),
+            }
+        }
+    }
+
+    /// The first stage for the four samples from `s` (the `Q`-th vector of twelve samples,
+    /// `s` a multiple of 4): the hat's `log2 E₀` and its weight row's first entry in `k.rows`
+    /// (as `i32` lanes); every frame's votes and observed-code factors into `vs` and `fs`.
+    ///
+    /// # Safety
+    /// `s + 4 ≤ codes[j].len()` for every frame `j` (the codes are read unchecked).
+    #[inline]
+    unsafe fn hat_stage<const P: usize, const Q: usize>(
+        k: &Fused,
+        codes: &[&[u8]; P],
+        s: usize,
+        c: &Consts,
+        vs: &mut [v128; P],
+        fs: &mut [v128; P],
+    ) -> (v128, v128) {
+        let zero = f32x4_splat(0.0);
+        let (mut num, mut den, mut gn, mut gd) = (zero, zero, zero, zero);
+        for j in 0..P {
+            // SAFETY: the caller's promise, `s + 4 ≤ codes[j].len()`.
+            let b = unsafe { codes[j].as_ptr().add(s) };
+            // SAFETY: four readable bytes at `b`; the low four bytes of the splat, widened.
+            let word = unsafe { b.cast::<u32>().read_unaligned() };
+            let z = u32x4_extend_low_u16x8(u16x8_extend_low_u8x16(u32x4_splat(word)));
+            let Ok(table) = <&[[f32; 2]; 768]>::try_from(&k.votes[j * 768..j * 768 + 768]) else {
+                unreachable!("a frame's entries")
+            };
+            // SAFETY: as above.
+            let (vj, fj) = unsafe { lookup::<Q>(table, b) };
+            (vs[j], fs[j]) = (vj, fj);
+            let w = hat_weight::<P>(j, z);
+            let wv = f32x4_mul(w, vj);
+            // The hat's sums, three frames to a group as the scalar path adds them.
+            if j % 3 == 0 {
+                (gd, gn) = (w, wv);
+            } else {
+                gd = f32x4_add(gd, w);
+                gn = f32x4_add(gn, wv);
+            }
+            if j % 3 == 2 || j + 1 == P {
+                if j < 3 {
+                    (num, den) = (gn, gd);
+                } else {
+                    num = f32x4_add(num, gn);
+                    den = f32x4_add(den, gd);
+                }
+            }
+        }
+        // The hat's log2 E₀ and its weight row (`floor_bin` of refine.rs: `pmax(0, x)` is
+        // `if 0 < x { x } else { 0 }` (NaN gives 0) and `pmin(top, x)` `if x < top { x } else
+        // { top }`, its selects; x is then in `0 ..= last < 2²²`, its floor its truncation).
+        let e0 = f32x4_div(num, den);
+        let bins = f32x4_splat(super::super::refine::BINS_PER_STOP);
+        let x = f32x4_sub(f32x4_mul(e0, bins), c.off[Q]);
+        let x = f32x4_pmin(c.last[Q], f32x4_pmax(zero, x));
+        let at = i32x4_add(c.start[Q], i32x4_trunc_sat_f32x4(x));
+        let base = i32x4_mul(at, i32x4_splat(P as i32));
+        let base = i32x4_max(i32x4_min(base, c.max_base), i32x4_splat(0));
+        (e0, base)
+    }
+
+    /// The votes and factors `table[256 c + z]` of four codes `z` whose lanes are the `Q`-th
+    /// vector of twelve samples (lane `l`'s channel `c = (4 Q + l) % 3`, a constant): each
+    /// entry by one 8-byte load, two to a vector, split by two shuffles.
+    ///
+    /// # Safety
+    /// `z` points to four readable bytes.
+    #[inline]
+    unsafe fn lookup<const Q: usize>(table: &[[f32; 2]; 768], z: *const u8) -> (v128, v128) {
+        let base = table.as_ptr();
+        // SAFETY: `z + l` is readable (the caller's promise, `l < 4`), and
+        // `256 c + z ≤ 2 · 256 + 255 = 767` is within the table; an entry is eight bytes.
+        let at = |l: usize| unsafe {
+            base.add(256 * ((4 * Q + l) % 3) + *z.add(l) as usize)
+                .cast::<u64>()
+                .read_unaligned()
+        };
+        // a = [v0 f0 v1 f1], b = [v2 f2 v3 f3].
+        let (a, b) = (u64x2(at(0), at(1)), u64x2(at(2), at(3)));
+        (
+            i32x4_shuffle::<0, 2, 4, 6>(a, b),
+            i32x4_shuffle::<1, 3, 5, 7>(a, b),
+        )
+    }
+
+    /// `super::hat_weight` for four codes.
+    #[inline]
+    fn hat_weight<const P: usize>(j: usize, z: v128) -> v128 {
+        let full = f32x4_splat(super::super::hat::W_MAX);
+        let mut w = f32x4_convert_i32x4(i32x4_min(z, i32x4_sub(i32x4_splat(255), z)));
+        if j == 0 {
+            let high = i32x4_gt(z, i32x4_splat(127));
+            w = v128_bitselect(full, w, high);
+        }
+        if j + 1 == P {
+            let low = i32x4_gt(i32x4_splat(128), z);
+            w = v128_bitselect(full, w, low);
+        }
+        if j == 0 {
+            // `w` is a number: `pmax` is `max`.
+            w = f32x4_pmax(w, f32x4_splat(super::super::hat::W_FLOOR));
+        }
+        w
+    }
+
+    /// [`crate::fastmath::exp2`] for four values: the same operations in the same order.
+    #[inline]
+    fn exp2(x: v128) -> v128 {
+        // `x.clamp(−L, L)`, its two selects: `if x < −L { −L } else { x }`, then
+        // `if L < x { L } else { x }`; NaN stays NaN.
+        let x = f32x4_pmax(x, f32x4_splat(-EXP2_LIMIT));
+        let x = f32x4_pmin(x, f32x4_splat(EXP2_LIMIT));
+        let magic = f32x4_splat(EXP2_MAGIC);
+        let t = f32x4_add(x, magic);
+        let k = i32x4_sub(t, magic);
+        let f = f32x4_sub(x, f32x4_sub(t, magic));
+        let c = EXP2_C.map(|v| f32x4_splat(v));
+        let p = f32x4_add(c[4], f32x4_mul(f, c[5]));
+        let p = f32x4_add(c[3], f32x4_mul(f, p));
+        let p = f32x4_add(c[2], f32x4_mul(f, p));
+        let p = f32x4_add(c[1], f32x4_mul(f, p));
+        let p = f32x4_add(c[0], f32x4_mul(f, p));
+        let scale = i32x4_shl(i32x4_add(k, i32x4_splat(127)), 23);
+        f32x4_mul(p, scale)
     }
 }
 

@@ -6,6 +6,9 @@
 //! 3·10⁻⁶ stops, see [`fast_log2`]) instead of the C library's `log2f`, which is a call per
 //! pixel the compiler cannot vectorise or inline.
 
+// `fastmath`'s `min` and `max`: no `fminf`/`fmaxf` call per pixel on wasm32 (the same values:
+// the first argument is the one that may be NaN, and a zero's sign changes no result here).
+use crate::fastmath::{max, min};
 use crate::image::{luminance, Circle, HdrImage, RgbImage};
 
 #[cfg(feature = "parallel")]
@@ -190,18 +193,19 @@ impl Acc {
         for chunk in px.chunks(3 * B) {
             let n = chunk.len() / 3;
             for (l, p) in lum.iter_mut().zip(chunk.chunks_exact(3)) {
-                *l = luminance([p[0].max(0.0), p[1].max(0.0), p[2].max(0.0)]);
+                *l = luminance([max(p[0], 0.0), max(p[1], 0.0), max(p[2], 0.0)]);
             }
             for (g, l) in lg[..n].iter_mut().zip(&lum[..n]) {
-                *g = log2_normal(l.max(f32::MIN_POSITIVE));
+                // `l` is a number (its channels are, and not negative).
+                *g = log2_normal(max(*l, f32::MIN_POSITIVE));
             }
             for (&l, &g) in lum[..n].iter().zip(&lg[..n]) {
                 if l > 0.0 && l < f32::INFINITY {
                     let g = if l < f32::MIN_POSITIVE { l.log2() } else { g };
                     row_sum += g;
                     row_n += 1;
-                    lo = lo.min(l);
-                    hi = hi.max(l);
+                    lo = min(l, lo);
+                    hi = max(l, hi);
                     let bin = ((g - HIST_MIN_LOG2 as f32) * HIST_BINS_PER_STOP as f32)
                         .clamp(0.0, (HIST_BINS - 1) as f32) as usize;
                     self.hist[bin] += wt;
@@ -223,13 +227,13 @@ impl Acc {
     /// One pixel with weight `w` (1..=FULL_WEIGHT).
     #[inline(always)]
     fn add_one(&mut self, p: &[f32], w: u32) {
-        let l = luminance([p[0].max(0.0), p[1].max(0.0), p[2].max(0.0)]);
+        let l = luminance([max(p[0], 0.0), max(p[1], 0.0), max(p[2], 0.0)]);
         if l > 0.0 && l < f32::INFINITY {
             let lg = fast_log2(l);
             self.count += u64::from(w);
             self.sum_log2 += f64::from(lg * w as f32);
-            self.min = self.min.min(l);
-            self.max = self.max.max(l);
+            self.min = min(l, self.min);
+            self.max = max(l, self.max);
             let bin = ((lg - HIST_MIN_LOG2 as f32) * HIST_BINS_PER_STOP as f32)
                 .clamp(0.0, (HIST_BINS - 1) as f32) as usize;
             self.hist[bin] += u64::from(w);
