@@ -51,16 +51,18 @@ pub struct CalibArgs {
     /// weight (default 0, the seed's hat; 2.55 is colour-hdri's). Not with --method seed.
     #[arg(long, value_name = "CODES")]
     pub hat_margin: Option<f64>,
-    /// `auto` (default) is `covering` for brackets of 5 frames or more and `robust` for fewer
-    /// (the better of the two at each count on synthetic brackets with a known truth, see
-    /// docs/accuracy.md); given --samples, --stratify, --fit, --lambda, --hat-margin, --grid or
+    /// `auto` (default) is `covering` for brackets of 5 frames or more and `joined` for fewer
+    /// (the best at each count on synthetic brackets with a known truth and on real
+    /// sub-brackets, see docs/accuracy.md); given --samples, --stratify, --fit, --lambda, --hat-margin, --grid or
     /// --code-bands it is `robust` at every count, those options applied, and so it is with
     /// `merge --exposures measured` (measuring alternates with the fit).
     /// `robust` rejects clipped, edge and non-monotonic samples and raises N; `noise` is robust
     /// with 2000 samples stratified over the middle frame's codes and the noise-weighted fit
     /// (λ 100); `covering` is the noise-weighted fit on 2000 samples spread over 16 code bands of
     /// every frame and channel, codes from 1 counted (λ 150; closest to the oracle, see
-    /// docs/accuracy.md); `colour-hdri` is colour-hdri's Debevec calibration (1000 histogram samples,
+    /// docs/accuracy.md); `joined` is the covering curve with the `robust` curve's toe (its
+    /// slopes below code 128, blended up to 192; the `robust` curve alone where the covering
+    /// fit fails); `colour-hdri` is colour-hdri's Debevec calibration (1000 histogram samples,
     /// Grossberg & Nayar: no alignment needed, but noisy frames bend the curve — see
     /// docs/accuracy.md; λ 30, its hat); `seed` is the original method exactly (random pixels
     /// per cell, no rejection).
@@ -77,7 +79,7 @@ pub struct CalibArgs {
 /// Sampling method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Method {
-    /// `covering` for brackets of 5 frames or more, `robust` for fewer (the default).
+    /// `covering` for brackets of 5 frames or more, `joined` for fewer (the default).
     Auto,
     /// Rejection of useless samples and automatic N.
     Robust,
@@ -85,6 +87,8 @@ pub enum Method {
     Noise,
     /// Robust, covering every code band of every frame, 2000 samples, the noise-weighted fit.
     Covering,
+    /// The covering curve with the robust method's toe below code 128, blended up to 192.
+    Joined,
     /// colour-hdri's calibration: histogram samples, λ 30, its hat.
     ColourHdri,
     /// The seed's method exactly.
@@ -149,6 +153,7 @@ impl CalibArgs {
             Method::Robust => robust(CalibrateOptions::robust()),
             Method::Noise => robust(CalibrateOptions::noise_fit()),
             Method::Covering => robust(CalibrateOptions::covering()),
+            Method::Joined => robust(CalibrateOptions::joined()),
             Method::ColourHdri => {
                 let base = CalibrateOptions::colour_hdri();
                 CalibrateOptions {

@@ -194,8 +194,8 @@ pub fn json_dumps(obj: &Bound<'_, PyAny>) -> PyResult<String> {
 /// the command line's: ``samples`` (N, raised so that N·(frames−1) ≥ 255 unless
 /// ``method="seed"``), ``grid`` (G: samples drawn in G×G cells), ``seed``, ``code_bands``,
 /// ``lambda_`` (smoothness weight λ), ``method`` (``"auto"``: ``"covering"`` for brackets of
-/// five frames or more and ``"robust"`` for fewer, as the command line's default; ``"robust"``;
-/// ``"covering"``; ``"seed"``, the original method exactly), ``solver`` (``"schur"`` or ``"svd"``), ``circle`` ((cx, cy, r) in pixels:
+/// five frames or more and ``"joined"`` for fewer, as the command line's default; ``"robust"``;
+/// ``"covering"``; ``"joined"``; ``"seed"``, the original method exactly), ``solver`` (``"schur"`` or ``"svd"``), ``circle`` ((cx, cy, r) in pixels:
 /// sample only inside the fish-eye circle), ``linear`` (known-linear data: a linear profile).
 /// Calibration warnings are issued as Python warnings. The GIL is released while it computes.
 ///
@@ -249,8 +249,11 @@ pub fn calibrate(
                 ..base
             }
         }
-        "covering" => {
-            let mut o = CalibrateOptions::covering();
+        "covering" | "joined" => {
+            let mut o = match method.as_str() {
+                "joined" => CalibrateOptions::joined(),
+                _ => CalibrateOptions::covering(),
+            };
             o.sampling.seed = seed;
             if let Some(n) = samples {
                 o.sampling.samples = n;
@@ -272,7 +275,7 @@ pub fn calibrate(
         _ => {
             return Err(value_error(
                 "method",
-                format!("'{method}': expected 'auto', 'robust', 'covering' or 'seed'"),
+                format!("'{method}': expected 'auto', 'robust', 'covering', 'joined' or 'seed'"),
             ))
         }
     };

@@ -23,7 +23,7 @@ def test_real_bracket_hdr_is_byte_identical_to_the_cli(cli, tmp_path):
     cli_report.pop("written")
     assert dome.report == cli_report
     # The default calibration resolved for three frames, named as --method names it.
-    assert dome.report["calibration"] == "robust"
+    assert dome.report["calibration"] == "joined"
     assert dome.radiance.shape == (cli_report["height"], cli_report["width"], 3)
     assert dome.radiance.dtype == np.float32
 

@@ -438,8 +438,13 @@ fn measured_into(c: &mut Calibrated, br: &mut Bracket, m: &exposures::Measuremen
 }
 
 /// What a calibration on this bracket gives the run: its response, the profile made from it
-/// (described from the bracket's EXIF), the sampling report and its warnings.
+/// (described from the bracket's EXIF), the sampling report and its warnings, and the
+/// method's name (saying so when a joined calibration gave the grid curve alone).
 fn calibrated_on(cal: response::Calibration, br: &Bracket, method: String) -> Calibrated {
+    let method = match cal.grid_alone {
+        true => format!("{method} (the grid curve alone: the covering fit failed)"),
+        false => method,
+    };
     let sampling = cal.report().clone();
     let warnings = [
         sampling.relaxed_warning(),

@@ -43,7 +43,7 @@ use crate::pipeline::{
     PipelineError, Window,
 };
 use crate::response;
-use crate::sampling::{self, Gathered, Missing};
+use crate::sampling::{self, Gathered, Missing, SampleOptions, Samples};
 
 /// Rounds of reading the frames again for positions sampling asked for, before the run gives
 /// up streaming (and reads the whole frames).
@@ -233,23 +233,28 @@ pub(super) fn intake(
     let plan = match &options.response {
         ResponseSource::Calibrate(o) => {
             // The calibration this bracket's frame count asks for (the default's covering
-            // one from five frames): its draw decides what is gathered.
+            // one from five frames, the joined one below): its draws decide what is gathered
+            // (a joined calibration's own and its grid toe's).
             let o = o.for_frames(br.frames.len());
-            match sampling::plan((w, h), br.frames.len(), circle, &o.sampling) {
-                Ok(p) => Some((p, o)),
-                Err(_) => return Ok(None),
+            let draws: Vec<SampleOptions> = std::iter::once(o.sampling.clone())
+                .chain(response::toe_sampling(&o))
+                .collect();
+            let mut positions = Vec::new();
+            for d in &draws {
+                match sampling::plan((w, h), br.frames.len(), circle, d) {
+                    Ok(p) => positions.push((p, d.patch)),
+                    Err(_) => return Ok(None),
+                }
             }
+            Some((positions, o))
         }
         ResponseSource::Profile(_) => None,
     };
     let mut gathered = Vec::new();
-    if let Some((positions, o)) = &plan {
-        gathered.push(Gathered::new(
-            positions,
-            br.frames.len(),
-            o.sampling.patch,
-            (w, h),
-        ));
+    if let Some((positions, _)) = &plan {
+        for (p, patch) in positions {
+            gathered.push(Gathered::new(p, br.frames.len(), *patch, (w, h)));
+        }
     }
     // The merge fits the noise model unless a profile's stands in for the fit.
     let profile_noise = match &options.response {
@@ -312,32 +317,57 @@ pub(super) fn intake(
             ResponseSource::Calibrate(_) => return Ok(None),
         },
         Some((_, o)) => {
-            let mut rounds = 0;
-            let samples = loop {
-                match sampling::sample_from(&gathered, (w, h), circle, &o.sampling) {
-                    Err(_) => return Ok(None),
-                    Ok(Ok(s)) => break s,
-                    Ok(Err(Missing(more))) => {
-                        rounds += 1;
-                        if rounds > MAX_GATHER_ROUNDS {
-                            return Ok(None);
-                        }
-                        let mut g = Gathered::new(&more, order.len(), o.sampling.patch, (w, h));
-                        for group in all.chunks(at_once) {
-                            let done = in_parallel(group, |&j| read(order[j]));
-                            for (d, &j) in done.into_iter().zip(group) {
-                                let Some(px) = d else {
-                                    return Ok(None);
-                                };
-                                g.add_frame(j, &Pixels::U8(px));
+            // One draw from what was gathered, reading the frames again for the positions
+            // it finds missing (`None`: the draw fails; the outer `None`: a frame did not
+            // decode again, or too many rounds).
+            let mut draw = |opts: &SampleOptions| -> Option<Option<Samples>> {
+                let mut rounds = 0;
+                loop {
+                    match sampling::sample_from(&gathered, (w, h), circle, opts) {
+                        Err(_) => return Some(None),
+                        Ok(Ok(s)) => return Some(Some(s)),
+                        Ok(Err(Missing(more))) => {
+                            rounds += 1;
+                            if rounds > MAX_GATHER_ROUNDS {
+                                return None;
                             }
+                            let mut g = Gathered::new(&more, order.len(), opts.patch, (w, h));
+                            for group in all.chunks(at_once) {
+                                let done = in_parallel(group, |&j| read(order[j]));
+                                for (d, &j) in done.into_iter().zip(group) {
+                                    g.add_frame(j, &Pixels::U8(d?));
+                                }
+                            }
+                            gathered.push(g);
                         }
-                        gathered.push(g);
                     }
                 }
             };
+            let cal = match response::toe_sampling(&o) {
+                None => match draw(&o.sampling) {
+                    Some(Some(samples)) => {
+                        response::calibrate_with_samples(&br.frames, samples, &o)
+                    }
+                    _ => return Ok(None),
+                },
+                Some(toe) => {
+                    let Some(Some(grid)) = draw(&toe) else {
+                        return Ok(None);
+                    };
+                    let Some(own) = draw(&o.sampling) else {
+                        return Ok(None);
+                    };
+                    // The own draw failing is not the run's error: the grid curve stands in.
+                    let own = own.ok_or(response::ResponseError::NoSamples {
+                        clipped: 0,
+                        edge: 0,
+                        non_monotonic: 0,
+                    });
+                    response::calibrate_joined_with_samples(&br.frames, own, grid, &o)
+                }
+            };
             drop(gathered);
-            match response::calibrate_with_samples(&br.frames, samples, &o) {
+            match cal {
                 Ok(cal) => calibrated_on(cal, &br, o.method_name()),
                 Err(_) => return Ok(None),
             }

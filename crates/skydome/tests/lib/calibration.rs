@@ -74,7 +74,7 @@ fn schur_solution_agrees_with_dense_svd_to_1e_6() {
 #[test]
 fn dense_svd_solver_option_gives_the_same_calibration() {
     let b = small_bracket();
-    let mut o = CalibrateOptions::default();
+    let mut o = CalibrateOptions::robust();
     let a = calibrate(&b.frames, b.circle, &o).unwrap();
     o.solver = Solver::DenseSvd;
     let d = calibrate(&b.frames, b.circle, &o).unwrap();
@@ -150,7 +150,7 @@ fn seed_method_is_reproducible_and_returns_plot_points() {
 #[test]
 fn error_falls_with_sample_count_as_in_the_seeds_experiment() {
     let b = small_bracket();
-    let o = CalibrateOptions::default();
+    let o = CalibrateOptions::robust();
     let counts = [30, 100, 300, 400, 600];
     let pts = sample_count_experiment(&b.frames, b.circle, &o, &counts, 4).unwrap();
     println!("N     used   spread (ln, rms)   curve RMSE vs truth (stops, R/G/B)");
@@ -171,7 +171,7 @@ fn error_falls_with_sample_count_as_in_the_seeds_experiment() {
 #[test]
 fn stability_calls_a_good_bracket_stable_and_scrambled_frames_unstable() {
     let b = small_bracket();
-    let st = stability(&b.frames, b.circle, &CalibrateOptions::default(), 5).unwrap();
+    let st = stability(&b.frames, b.circle, &CalibrateOptions::robust(), 5).unwrap();
     println!(
         "good bracket: rms spread {:.4}, max {:.4}",
         st.rms_spread, st.max_spread
@@ -605,7 +605,7 @@ fn held_out_residuals_tell_a_wrong_toe() {
 
 /// The report's calibration name (`CalibrateOptions::method_name`): every named method's own
 /// name whatever its sample seed and solver, `auto` until resolved for a frame count (the
-/// covering calibration from five frames, robust below; robust again with measured
+/// covering calibration from five frames, the joined one below; robust again with measured
 /// exposures), and a changed option said.
 #[test]
 fn every_calibration_method_has_its_command_line_name() {
@@ -615,6 +615,7 @@ fn every_calibration_method_has_its_command_line_name() {
         (CalibrateOptions::robust(), "robust"),
         (CalibrateOptions::noise_fit(), "noise"),
         (CalibrateOptions::covering(), "covering"),
+        (CalibrateOptions::joined(), "joined"),
         (CalibrateOptions::colour_hdri(), "colour-hdri"),
         (
             CalibrateOptions::seed_method(70, 7, 3, 10.0, Solver::DenseSvd),
@@ -636,9 +637,9 @@ fn every_calibration_method_has_its_command_line_name() {
     let auto = CalibrateOptions::default();
     assert_eq!(auto.method_name(), "auto");
     for (frames, name) in [
-        (2, "robust"),
-        (3, "robust"),
-        (4, "robust"),
+        (2, "joined"),
+        (3, "joined"),
+        (4, "joined"),
         (5, "covering"),
         (9, "covering"),
     ] {

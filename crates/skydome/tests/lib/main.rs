@@ -42,6 +42,7 @@ mod render;
 mod reproducible;
 mod reproject;
 mod sky;
+mod sub_brackets;
 mod sun_sweep;
 mod sun_truth;
 mod synth;

@@ -662,7 +662,7 @@ fn a_bracket_read_one_frame_at_a_time_gives_the_whole_frames_bytes() {
             ..base.clone()
         };
         // The calibration the report names: the default's resolved for the frame count.
-        let default_name = if evs.len() >= 5 { "covering" } else { "robust" };
+        let default_name = if evs.len() >= 5 { "covering" } else { "joined" };
         for (o, name) in [
             (&base, Some(default_name)),
             (&noise, Some("noise")),
