@@ -797,16 +797,12 @@ fn pair_sums_with(
     ub: impl Fn(usize) -> f32,
 ) -> PairSums {
     let n = a.len.min(b.len);
-    let mut s = PairSums {
-        sa: 0.0,
-        sb: 0.0,
-        sad: 0.0,
-        count: 0,
-        darker: 0,
-        brighter: 0,
-        blocks: [[[0f64; 3]; 2]; GRID * GRID],
-        in_block: [[0usize; 3]; GRID * GRID],
-    };
+    // Sums in locals (registers), the blocks' sums in arrays of the frame: written into the
+    // result once, not through it per sample.
+    let (mut sa, mut sb, mut sad, mut count) = (0f64, 0f64, 0f64, 0usize);
+    let (mut darker, mut brighter) = (0usize, 0usize);
+    let mut blocks = [[[0f64; 3]; 2]; GRID * GRID];
+    let mut in_block = [[0usize; 3]; GRID * GRID];
     let (w, h) = (a.width.max(1), a.height.max(1));
     // The block column of every pixel column, and the first block of a pixel row.
     let column_block: Vec<usize> = (0..w).map(|x| (x * GRID / w).min(GRID - 1)).collect();
@@ -822,19 +818,19 @@ fn pair_sums_with(
             let (va, vb) = (ua(ja + c), ub(jb + c));
             let d = vb - va;
             if d < -0.03 {
-                s.darker += 1;
+                darker += 1;
             } else if d > 0.03 {
-                s.brighter += 1;
+                brighter += 1;
             }
             let picture = |v: f32| v > dark.pedestal[c] && v < CLIP_UNIT;
             if picture(va) && picture(vb) {
-                s.sa += f64::from(va);
-                s.sb += f64::from(vb);
-                s.sad += f64::from((va - vb).abs());
-                s.count += 1;
-                s.blocks[k][0][c] += f64::from(va);
-                s.blocks[k][1][c] += f64::from(vb);
-                s.in_block[k][c] += 1;
+                sa += f64::from(va);
+                sb += f64::from(vb);
+                sad += f64::from((va - vb).abs());
+                count += 1;
+                blocks[k][0][c] += f64::from(va);
+                blocks[k][1][c] += f64::from(vb);
+                in_block[k][c] += 1;
             }
         }
         i += 21;
@@ -847,7 +843,16 @@ fn pair_sums_with(
             row = row_block(y);
         }
     }
-    s
+    PairSums {
+        sa,
+        sb,
+        sad,
+        count,
+        darker,
+        brighter,
+        blocks,
+        in_block,
+    }
 }
 
 /// Compares two frames on the samples of every 7th pixel, in one pass over both.
