@@ -599,11 +599,24 @@ fn informative(v: f32, floor: f32) -> bool {
 }
 
 /// Informative values among every 21st sample of a frame.
+///
+/// 8-bit samples are judged by a table of the 256 codes (the same verdicts as [`Pixels::unit`]'s
+/// division, without one per sample).
 fn informative_count(f: &Look<'_>, floor: f32) -> usize {
-    (0..f.len)
-        .step_by(21)
-        .filter(|&i| informative(f.unit(i), floor))
-        .count()
+    match f.pixels {
+        Pixels::U8(v) => {
+            let inf: [bool; 256] = std::array::from_fn(|c| informative(c as f32 / 255.0, floor));
+            v.iter()
+                .step_by(f.step(21))
+                .take(f.len.div_ceil(21))
+                .filter(|&&code| inf[usize::from(code)])
+                .count()
+        }
+        Pixels::U16(_) => (0..f.len)
+            .step_by(21)
+            .filter(|&i| informative(f.unit(i), floor))
+            .count(),
+    }
 }
 
 /// A frame with fewer informative samples (of every 21st) than this adds nothing: 0.05 % of
@@ -644,17 +657,7 @@ impl Dark {
             return Dark { pedestal };
         };
         for (c, p) in pedestal.iter_mut().enumerate() {
-            let mut hist = [0usize; 256];
-            let n = darkest.len;
-            let mut i = c;
-            while i < n {
-                let code = match darkest.pixels {
-                    Pixels::U8(v) => v[darkest.at(i)],
-                    Pixels::U16(v) => bin16(v[darkest.at(i)]),
-                };
-                hist[usize::from(code)] += 1;
-                i += 21;
-            }
+            let hist = channel_histogram(darkest, c);
             let total: usize = hist.iter().sum();
             let mode = (0..256)
                 .max_by_key(|&z| (hist[z], usize::MAX - z))
@@ -694,6 +697,27 @@ impl Dark {
     }
 }
 
+/// The histogram of channel `c`'s 8-bit codes (16-bit ones binned) over a frame's samples
+/// `i = c, c + 21, …` (channel `c` of every 7th pixel), read straight from the held samples
+/// `c, c + step, …` (no per-sample [`Look::at`] or match on the depth).
+fn channel_histogram(f: &Look<'_>, c: usize) -> [usize; 256] {
+    let mut hist = [0usize; 256];
+    let (step, count) = (f.step(21), f.len.saturating_sub(c).div_ceil(21));
+    match f.pixels {
+        Pixels::U8(v) => {
+            for &code in v.iter().skip(c).step_by(step).take(count) {
+                hist[usize::from(code)] += 1;
+            }
+        }
+        Pixels::U16(v) => {
+            for &code in v.iter().skip(c).step_by(step).take(count) {
+                hist[usize::from(bin16(code))] += 1;
+            }
+        }
+    }
+    hist
+}
+
 /// What comparing two neighbouring frames of a bracket (`a` exposed shorter than `b`) found.
 struct PairCheck {
     /// The two frames carry (nearly) the same picture: over the values that are picture in
@@ -723,21 +747,75 @@ struct PairCheck {
 /// The grid of blocks whose mean brightness orders [`PairCheck::other_scene`].
 const GRID: usize = 8;
 
-/// Compares two frames on the samples of every 7th pixel, in one pass over both.
-fn compare_pair(a: &Look<'_>, b: &Look<'_>, dark: &Dark) -> PairCheck {
+/// What [`compare_pair`] sums over the samples of every 7th pixel of two frames.
+#[derive(Debug, Clone, PartialEq)]
+struct PairSums {
+    /// Sums of `a`'s and `b`'s unit values and of their absolute differences, over the samples
+    /// that are picture in both; `count` such samples.
+    sa: f64,
+    sb: f64,
+    sad: f64,
+    count: usize,
+    /// Samples where `b` is darker (brighter) than `a` by more than 0.03.
+    darker: usize,
+    brighter: usize,
+    /// Per block of an 8 × 8 grid and channel, the sums of both frames' picture samples.
+    blocks: [[[f64; 3]; 2]; GRID * GRID],
+    in_block: [[usize; 3]; GRID * GRID],
+}
+
+/// [`pair_sums_with`], reading 8-bit samples through a table of their unit values (the same
+/// `f32`s as [`Pixels::unit`]'s division, which costs more per sample, in WebAssembly most).
+fn pair_sums(a: &Look<'_>, b: &Look<'_>, dark: &Dark) -> PairSums {
+    match (a.pixels, b.pixels) {
+        (Pixels::U8(va), Pixels::U8(vb)) => {
+            let unit: [f32; 256] = std::array::from_fn(|c| c as f32 / 255.0);
+            pair_sums_with(
+                a,
+                b,
+                dark,
+                |j| unit[usize::from(va[j])],
+                |j| unit[usize::from(vb[j])],
+            )
+        }
+        _ => pair_sums_with(a, b, dark, |j| a.pixels.unit(j), |j| b.pixels.unit(j)),
+    }
+}
+
+/// Sums two frames' samples `i = 21·k + c` (channel `c` of every 7th pixel), in one pass over
+/// both; `ua`/`ub` give the unit value of a held sample (see [`Look::at`]).
+///
+/// The pixel's column and row are carried from sample to sample and its grid block looked up,
+/// so the pass divides nothing per sample (it divided four times per pixel, and once more per
+/// 8-bit sample in [`Pixels::unit`]). The samples, their order and so every sum are those of
+/// the per-sample formulas (`x = i / 3 % w`, `y = i / 3 / w`; a unit test compares them).
+fn pair_sums_with(
+    a: &Look<'_>,
+    b: &Look<'_>,
+    dark: &Dark,
+    ua: impl Fn(usize) -> f32,
+    ub: impl Fn(usize) -> f32,
+) -> PairSums {
     let n = a.len.min(b.len);
+    // Sums in locals (registers), the blocks' sums in arrays of the frame: written into the
+    // result once, not through it per sample.
     let (mut sa, mut sb, mut sad, mut count) = (0f64, 0f64, 0f64, 0usize);
     let (mut darker, mut brighter) = (0usize, 0usize);
-    // Per block of an 8 × 8 grid and channel, the sums of both frames' samples.
-    let (w, h) = (a.width.max(1), a.height.max(1));
     let mut blocks = [[[0f64; 3]; 2]; GRID * GRID];
     let mut in_block = [[0usize; 3]; GRID * GRID];
+    let (w, h) = (a.width.max(1), a.height.max(1));
+    // The block column of every pixel column, and the first block of a pixel row.
+    let column_block: Vec<usize> = (0..w).map(|x| (x * GRID / w).min(GRID - 1)).collect();
+    let row_block = |y: usize| (y * GRID / h).min(GRID - 1) * GRID;
+    // Sample i = 21·k is pixel 7·k: column x, row y. The held samples of a and b start at ja, jb.
+    let (step_a, step_b) = (a.step(21), b.step(21));
+    let (mut ja, mut jb, mut x, mut y) = (0usize, 0usize, 0usize, 0usize);
+    let mut row = row_block(0);
     let mut i = 0;
     while i + 2 < n {
-        let (x, y) = ((i / 3) % w, (i / 3) / w);
-        let k = (y * GRID / h).min(GRID - 1) * GRID + (x * GRID / w).min(GRID - 1);
+        let k = row + column_block[x];
         for c in 0..3 {
-            let (va, vb) = (a.unit(i + c), b.unit(i + c));
+            let (va, vb) = (ua(ja + c), ub(jb + c));
             let d = vb - va;
             if d < -0.03 {
                 darker += 1;
@@ -756,7 +834,40 @@ fn compare_pair(a: &Look<'_>, b: &Look<'_>, dark: &Dark) -> PairCheck {
             }
         }
         i += 21;
+        ja += step_a;
+        jb += step_b;
+        x += 7;
+        while x >= w {
+            x -= w;
+            y += 1;
+            row = row_block(y);
+        }
     }
+    PairSums {
+        sa,
+        sb,
+        sad,
+        count,
+        darker,
+        brighter,
+        blocks,
+        in_block,
+    }
+}
+
+/// Compares two frames on the samples of every 7th pixel, in one pass over both.
+fn compare_pair(a: &Look<'_>, b: &Look<'_>, dark: &Dark) -> PairCheck {
+    let n = a.len.min(b.len);
+    let PairSums {
+        sa,
+        sb,
+        sad,
+        count,
+        darker,
+        brighter,
+        blocks,
+        in_block,
+    } = pair_sums(a, b, dark);
     // Too few usable samples (frames almost all black or white): nothing to compare. As few
     // as a frame needs to be kept (0.05 % of the samples): a film scan's short frames show
     // picture only in their windows.
@@ -838,5 +949,136 @@ impl<'a> Look<'a> {
     #[inline]
     fn unit(&self, i: usize) -> f32 {
         self.pixels.unit(self.at(i))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sums as the per-sample formulas give them (the code `pair_sums` replaced).
+    fn pair_sums_by_division(a: &Look<'_>, b: &Look<'_>, dark: &Dark) -> PairSums {
+        let n = a.len.min(b.len);
+        let mut s = PairSums {
+            sa: 0.0,
+            sb: 0.0,
+            sad: 0.0,
+            count: 0,
+            darker: 0,
+            brighter: 0,
+            blocks: [[[0f64; 3]; 2]; GRID * GRID],
+            in_block: [[0usize; 3]; GRID * GRID],
+        };
+        let (w, h) = (a.width.max(1), a.height.max(1));
+        let mut i = 0;
+        while i + 2 < n {
+            let (x, y) = ((i / 3) % w, (i / 3) / w);
+            let k = (y * GRID / h).min(GRID - 1) * GRID + (x * GRID / w).min(GRID - 1);
+            for c in 0..3 {
+                let (va, vb) = (a.unit(i + c), b.unit(i + c));
+                let d = vb - va;
+                if d < -0.03 {
+                    s.darker += 1;
+                } else if d > 0.03 {
+                    s.brighter += 1;
+                }
+                let picture = |v: f32| v > dark.pedestal[c] && v < CLIP_UNIT;
+                if picture(va) && picture(vb) {
+                    s.sa += f64::from(va);
+                    s.sb += f64::from(vb);
+                    s.sad += f64::from((va - vb).abs());
+                    s.count += 1;
+                    s.blocks[k][0][c] += f64::from(va);
+                    s.blocks[k][1][c] += f64::from(vb);
+                    s.in_block[k][c] += 1;
+                }
+            }
+            i += 21;
+        }
+        s
+    }
+
+    /// A frame of random codes (xorshift from `seed`), 8- or 16-bit, whole or as its thumbnail.
+    fn random_frame(w: usize, h: usize, seed: u64, sixteen: bool, thumb: bool) -> Frame {
+        let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let n = 3 * w * h;
+        let pixels = match sixteen {
+            true => {
+                let v: Vec<u16> = (0..n).map(|_| next() as u16).collect();
+                Pixels::U16(if thumb { every_7th_pixel(&v) } else { v })
+            }
+            false => {
+                let v: Vec<u8> = (0..n).map(|_| next() as u8).collect();
+                Pixels::U8(if thumb { every_7th_pixel(&v) } else { v })
+            }
+        };
+        Frame {
+            name: format!("f{seed}"),
+            width: w,
+            height: h,
+            pixels,
+            exposure: Exposure {
+                time_s: 0.01,
+                iso: None,
+                f_number: None,
+            },
+        }
+    }
+
+    #[test]
+    fn the_pair_sums_histograms_and_informative_counts_are_the_per_sample_formulas() {
+        let dark = Dark {
+            pedestal: [0.03, 0.1, 0.25],
+        };
+        let mut cases = 0;
+        for (w, h) in [
+            (1, 1),
+            (2, 3),
+            (6, 4),
+            (7, 9),
+            (13, 11),
+            (64, 37),
+            (203, 17),
+            (401, 9),
+        ] {
+            for sixteen in [false, true] {
+                for thumb in [false, true] {
+                    let a = random_frame(w, h, (w * h) as u64, sixteen, thumb);
+                    let b = random_frame(w, h, (w * h + 1) as u64, sixteen, thumb);
+                    let (la, lb) = (Look::of(&a, thumb), Look::of(&b, thumb));
+                    let fast = pair_sums(&la, &lb, &dark);
+                    assert_eq!(fast, pair_sums_by_division(&la, &lb, &dark), "{w}×{h}");
+                    cases += usize::from(fast.count > 0);
+                    for c in 0..3 {
+                        let mut by_at = [0usize; 256];
+                        let mut i = c;
+                        while i < la.len {
+                            let code = match la.pixels {
+                                Pixels::U8(v) => v[la.at(i)],
+                                Pixels::U16(v) => bin16(v[la.at(i)]),
+                            };
+                            by_at[usize::from(code)] += 1;
+                            i += 21;
+                        }
+                        assert_eq!(channel_histogram(&la, c), by_at, "{w}×{h}");
+                    }
+                    for floor in [0.0, 0.05, 0.5] {
+                        let by_unit = (0..la.len)
+                            .step_by(21)
+                            .filter(|&i| informative(la.unit(i), floor))
+                            .count();
+                        assert_eq!(informative_count(&la, floor), by_unit, "{w}×{h}");
+                    }
+                }
+            }
+        }
+        // Every case but the 1×1 and 2×3 frames (one or a few sampled pixels) had picture.
+        assert!(cases >= 24, "{cases}");
     }
 }
