@@ -168,6 +168,13 @@ pub fn case_with_sun(seed: u64, n: usize, zenith: (f64, f64)) -> Case {
 
 /// The oracle merge of `case` (see the module docs).
 pub fn oracle(case: &Case) -> HdrImage {
+    oracle_with(case, None)
+}
+
+/// [`oracle`], with the votes `g(Z) − ln Δt` taken from `curves` (256 entries per channel,
+/// interpolated linearly between codes) instead of the true curve when given; the weights are
+/// the oracle's (true noise, true curve's slope) either way.
+pub fn oracle_with(case: &Case, curves: Option<&[Vec<f64>; 3]>) -> HdrImage {
     let o = &case.opts;
     let b = o.black_level;
     let k = 0.25 / o.base_time_s;
@@ -200,7 +207,14 @@ pub fn oracle(case: &Case) -> HdrImage {
                     Pixels::U8(v) => (v[3 * p + c] as f64, 255.0),
                     Pixels::U16(v) => (v[3 * p + c] as f64 / 257.0, 255.0),
                 };
-                let vote = g(c, z) - lt[j];
+                let vote = match curves {
+                    None => g(c, z),
+                    Some(cv) => {
+                        let z0 = (z.floor() as usize).min(254);
+                        let f = z - z0 as f64;
+                        cv[c][z0] * (1.0 - f) + cv[c][z0 + 1] * f
+                    }
+                } - lt[j];
                 if j == 0 {
                     fallback = Some(vote);
                 }
@@ -1399,6 +1413,308 @@ fn cross_validated_choice() {
             writeln!(out, "{bline}").unwrap();
             write!(out, "{clines}").unwrap();
             write!(out, "{flines}").unwrap();
+        }
+    }
+}
+
+/// The true curves of `case`, gauged like a calibrated one (`g(128) = 0`).
+pub fn true_curves(case: &Case) -> [Vec<f64>; 3] {
+    [0, 1, 2].map(|c| {
+        let g = case.opts.crf[c].g_with_black(case.opts.black_level);
+        let g0 = g[128];
+        g.iter().map(|v| v - g0).collect()
+    })
+}
+
+/// The true noise model of `case` in the merge's terms.
+pub fn true_noise(case: &Case) -> skydome::noise::NoiseModel {
+    let o = &case.opts;
+    skydome::noise::NoiseModel {
+        channels: [0, 1, 2].map(|c| skydome::noise::ChannelNoise {
+            electrons_at_gauge: o.full_well
+                * o.crf[c].inverse((128.0 - o.black_level) / (255.0 - o.black_level)),
+            read_noise: o.read_noise,
+            code_noise: case.jpeg_noise[c],
+        }),
+    }
+}
+
+/// Diagnosis of one bracket's sky error (`SKYDOME_ORACLE_SEEDS`, first seed;
+/// `SKYDOME_ORACLE_FRAMES`, first count; sun zenith 0–87°; docs/accuracy.md, "Eighth
+/// round"): the sky's per-channel error for every pairing of a curve (true, covering, grid)
+/// with the weights (the oracle's, the noise merge's with the fitted and with the true noise
+/// model, with a model fitted on the true curve and on the curve smoothed over ±8 codes, the
+/// hat); where in the sky the error sits (by the longest frame reading it below code 230 and
+/// by radiance); each curve against the true one code by code with the covering samples'
+/// observations and residuals; and, with `SKYDOME_DIAG_REFITS` (e.g. `"lo=32;lambda=1000"`:
+/// observations below code 32 dropped; λ 1000), the covering samples refitted. Release, a
+/// second per bracket: `SKYDOME_ORACLE_SEEDS=9107 SKYDOME_ORACLE_FRAMES=8 cargo test --release
+/// -p skydome --test lib -- --ignored --exact oracle::bracket_diagnosis --nocapture`.
+#[test]
+#[ignore = "a diagnosis; prints only"]
+fn bracket_diagnosis() {
+    let seed: u64 = std::env::var("SKYDOME_ORACLE_SEEDS")
+        .ok()
+        .and_then(|s| s.split(',').next().and_then(|v| v.trim().parse().ok()))
+        .unwrap_or(9107);
+    let n: usize = std::env::var("SKYDOME_ORACLE_FRAMES")
+        .ok()
+        .and_then(|s| s.split(',').next().and_then(|v| v.trim().parse().ok()))
+        .unwrap_or(8);
+    let c = case_with_sun(seed, n, (0.0, 87.0));
+    println!("{}", c.label);
+    println!(
+        "  crf {:?}, jpeg noise {:?}, evs {:?}",
+        c.opts.crf, c.jpeg_noise, c.opts.evs
+    );
+    let [sky, ground, _] = regions(&c);
+    let truth = true_curves(&c);
+    let mut cands: Vec<(String, CalibrateOptions)> = vec![
+        ("covering".into(), CalibrateOptions::covering()),
+        ("grid".into(), CalibrateOptions::robust()),
+    ];
+    cands.extend(candidates().into_iter().skip(1));
+    let cals: Vec<_> = cands
+        .iter()
+        .map(|(_, o)| calibrate(&c.frames, c.circle, o).unwrap())
+        .collect();
+    let mut curves: Vec<(String, [Vec<f64>; 3])> = vec![("true".into(), truth.clone())];
+    for ((name, _), cal) in cands.iter().zip(&cals) {
+        curves.push((name.clone(), cal.response.curves().clone()));
+    }
+    let orc = oracle(&c);
+    let eo = scale_and_rmse(&orc, &c.truth, &sky);
+    let floor = rms3(eo);
+    let tn = true_noise(&c);
+    println!("  true noise {:?}", tn.channels);
+    let mut kept: Vec<(String, HdrImage)> = Vec::new();
+    let show = |name: &str, img: &HdrImage| {
+        let e = scale_and_rmse(img, &c.truth, &sky);
+        println!(
+            "  {name:>28}: sky {:.4} ({:.3}×) per channel {:.4} {:.4} {:.4} | ground {:.3}",
+            rms3(e),
+            rms3(e) / floor,
+            e[0].1,
+            e[1].1,
+            e[2].1,
+            offset_rmse(img, &c.truth, &ground, e)
+        );
+    };
+    show("oracle", &orc);
+    for (name, g) in &curves {
+        let resp = skydome::response::Response::from_curves(g.clone()).unwrap();
+        let img = oracle_with(&c, Some(g));
+        show(&format!("{name} + oracle weights"), &img);
+        let fitted = merge(&c.frames, &resp, &MergeOptions::default()).unwrap();
+        if name == "true" || name == "covering" {
+            println!(
+                "    fitted noise: {:?}",
+                fitted.noise.as_ref().map(|n| n.model.channels)
+            );
+        }
+        show(&format!("{name} + noise (fitted)"), &fitted.radiance);
+        let tm = MergeOptions {
+            noise: Some(tn),
+            ..MergeOptions::default()
+        };
+        let img = merge(&c.frames, &resp, &tm).unwrap().radiance;
+        show(&format!("{name} + noise (true model)"), &img);
+        // The noise model fitted on the true curve, and on this curve smoothed (a moving mean
+        // over ±8 codes), each merged with this curve.
+        let true_resp = skydome::response::Response::from_curves(truth.clone()).unwrap();
+        let smooth = g.clone().map(|cv| {
+            (0..256)
+                .map(|z: usize| {
+                    let (a, b) = (z.saturating_sub(8), (z + 8).min(255));
+                    cv[a..=b].iter().sum::<f64>() / (b - a + 1) as f64
+                })
+                .collect::<Vec<f64>>()
+        });
+        let smooth_resp = skydome::response::Response::from_curves(smooth).unwrap();
+        for (what, r) in [("true", &true_resp), ("smoothed", &smooth_resp)] {
+            let est = skydome::noise::estimate(&c.frames, r, 0, None);
+            let mo = MergeOptions {
+                noise: Some(est.model),
+                ..MergeOptions::default()
+            };
+            let img = merge(&c.frames, &resp, &mo).unwrap().radiance;
+            show(&format!("{name} + noise (fit on {what})"), &img);
+        }
+        let hm = MergeOptions {
+            weighting: Weighting::Hat,
+            ..MergeOptions::default()
+        };
+        let img = merge(&c.frames, &resp, &hm).unwrap().radiance;
+        show(&format!("{name} + hat"), &img);
+        kept.push((name.clone(), fitted.radiance));
+    }
+    // Where the sky's error sits: by the longest frame that reads the pixel below code 230 in
+    // green (the frame the oracle trusts most), and by radiance (log2 of the truth, green).
+    let best = |p: usize| {
+        (0..n)
+            .rev()
+            .find(|&j| match &c.frames[j].pixels {
+                Pixels::U8(v) => v[3 * p + 1] < 230,
+                Pixels::U16(v) => v[3 * p + 1] < 230 * 257,
+            })
+            .unwrap_or(0)
+    };
+    let mut imgs: Vec<(&str, &HdrImage)> = vec![("oracle", &orc)];
+    for (name, img) in &kept {
+        imgs.push((name.as_str(), img));
+    }
+    let scales: Vec<[(f64, f64); 3]> = imgs
+        .iter()
+        .map(|(_, img)| scale_and_rmse(img, &c.truth, &sky))
+        .collect();
+    let total = sky.iter().filter(|&&m| m).count() as f64;
+    for (title, key) in [("best frame", 0usize), ("log2 radiance", 1)] {
+        println!("  sky by {title}: pixels, then per merge sum of squares / all sky pixels (stops²) and mean offset");
+        let group = |p: usize| -> i64 {
+            if key == 0 {
+                best(p) as i64
+            } else {
+                (c.truth.data[3 * p + 1] as f64).log2().floor() as i64
+            }
+        };
+        let mut keys: Vec<i64> = (0..sky.len()).filter(|&p| sky[p]).map(group).collect();
+        keys.sort();
+        keys.dedup();
+        for k in keys {
+            let mask: Vec<bool> = (0..sky.len()).map(|p| sky[p] && group(p) == k).collect();
+            let np = mask.iter().filter(|&&m| m).count();
+            let cells: Vec<String> = imgs
+                .iter()
+                .zip(&scales)
+                .map(|((name, img), sc)| {
+                    let pc = per_channel_offsets(img, &c.truth, &mask, *sc);
+                    let ss: f64 = pc.iter().map(|x| x.0).sum::<f64>() / 3.0;
+                    let mean: f64 = pc.iter().map(|x| x.2).sum::<f64>() / 3.0;
+                    format!("{name} {:.5} ({:+.3})", ss / total, mean)
+                })
+                .collect();
+            println!("    {k:3}: {np:5} px | {}", cells.join(" | "));
+        }
+    }
+    // The curves code by code (stops, after the offset over codes 64..=191), with the first
+    // candidate's (covering's) observations and final residuals per code band.
+    let cal = &cals[0];
+    let s = &cal.samples;
+    for ch in 0..3 {
+        println!(
+            "  channel {ch}: curve − true (stops) for {:?}; covering observations per 8 codes: count, median |r|, share beyond 5σ (σ = 1.4826 median |r|)",
+            curves.iter().skip(1).map(|(n, _)| n).collect::<Vec<_>>()
+        );
+        let offs: Vec<f64> = curves
+            .iter()
+            .map(|(_, g)| (64..192).map(|z| g[ch][z] - truth[ch][z]).sum::<f64>() / 128.0)
+            .collect();
+        let g = &cal.response.curves()[ch];
+        let e = &cal.log_irradiance[ch];
+        let mut bands: Vec<Vec<f64>> = vec![Vec::new(); 32];
+        let mut by_frame: Vec<Vec<usize>> = vec![vec![0; n]; 32];
+        for (i, ei) in e.iter().enumerate().take(s.count()) {
+            for (j, lt) in cal.log_times.iter().enumerate() {
+                let z = s.z(i, j, ch);
+                if !(1.0..=254.0).contains(&z) {
+                    continue;
+                }
+                let z0 = (z.floor() as usize).min(254);
+                let f = (z - z0 as f32) as f64;
+                let gz = g[z0] * (1.0 - f) + g[z0 + 1] * f;
+                bands[z0 / 8].push(gz - ei - lt);
+                by_frame[z0 / 8][j] += 1;
+            }
+        }
+        for z in (0..256).step_by(8) {
+            let errs: Vec<String> = curves
+                .iter()
+                .zip(&offs)
+                .skip(1)
+                .map(|((_, g), off)| {
+                    format!(
+                        "{:+.3}",
+                        (g[ch][z] - truth[ch][z] - off) / std::f64::consts::LN_2
+                    )
+                })
+                .collect();
+            let b = &mut bands[z / 8];
+            let mut a: Vec<f64> = b.iter().map(|r| r.abs()).collect();
+            a.sort_by(f64::total_cmp);
+            let med = if a.is_empty() { 0.0 } else { a[a.len() / 2] };
+            let mean = if b.is_empty() {
+                0.0
+            } else {
+                b.iter().sum::<f64>() / b.len() as f64
+            };
+            let beyond = a.iter().filter(|&&r| r > 5.0 * 1.4826 * med).count();
+            println!(
+                "    z {z:3}: true {:+.2} | {} | {:4} obs, mean r {:+.3} med|r| {:.3}, {beyond} beyond; frames {:?}",
+                truth[ch][z] / std::f64::consts::LN_2,
+                errs.join(" "),
+                b.len(),
+                mean,
+                med,
+                by_frame[z / 8]
+            );
+        }
+    }
+    let fitted_lt: Vec<String> = cal.log_times.iter().map(|v| format!("{v:.3}")).collect();
+    println!("  ln Δt {}", fitted_lt.join(" "));
+    // Refits of the covering samples (`SKYDOME_DIAG_REFITS`, `;`-separated, each `,`-separated
+    // `key=value`: `lo` / `hi` drop observations below / above a code, `lambda`, `cut`).
+    let spec = std::env::var("SKYDOME_DIAG_REFITS").unwrap_or_default();
+    for r in spec.split(';').filter(|r| !r.trim().is_empty()) {
+        let mut o = CalibrateOptions::covering();
+        let mut s2 = cal.samples.clone();
+        let (mut lo, mut hi) = (0f32, 255f32);
+        for kv in r.split(',') {
+            let (k, v) = kv.split_once('=').expect("key=value");
+            let f: f64 = v.trim().parse().expect("number");
+            match k.trim() {
+                "lo" => lo = f as f32,
+                "hi" => hi = f as f32,
+                "lambda" => o.lambda = f,
+                "cut" => o.outlier_sigmas = f,
+                other => panic!("unknown key {other}"),
+            }
+        }
+        for v in s2.values.iter_mut() {
+            for z in v.iter_mut() {
+                if *z < lo || *z > hi {
+                    *z = 0.0;
+                }
+            }
+        }
+        let refit = skydome::response::calibrate_samples_with(s2, &cal.log_times, &o).unwrap();
+        let g = refit.response.curves().clone();
+        let img = merge(&c.frames, &refit.response, &MergeOptions::default())
+            .unwrap()
+            .radiance;
+        let e = scale_and_rmse(&img, &c.truth, &sky);
+        let eo2 = scale_and_rmse(&oracle_with(&c, Some(&g)), &c.truth, &sky);
+        let ce = curve_error(&c, &g);
+        println!(
+            "  refit {r:>24}: sky {:.3}× (oracle weights {:.3}×) ground {:.3} | curve toe {:.3} mid {:.3} top {:.3}",
+            rms3(e) / floor,
+            rms3(eo2) / floor,
+            offset_rmse(&img, &c.truth, &ground, e),
+            ce[0],
+            ce[1],
+            ce[2]
+        );
+        for ch in 0..3 {
+            let off = (64..192).map(|z| g[ch][z] - truth[ch][z]).sum::<f64>() / 128.0;
+            let row: Vec<String> = (24..256)
+                .step_by(16)
+                .map(|z| {
+                    format!(
+                        "{:+.2}",
+                        (g[ch][z] - truth[ch][z] - off) / std::f64::consts::LN_2
+                    )
+                })
+                .collect();
+            println!("      ch {ch} z 24,40..: {}", row.join(" "));
         }
     }
 }
