@@ -52,8 +52,8 @@ pub struct CalibArgs {
     #[arg(long, value_name = "CODES")]
     pub hat_margin: Option<f64>,
     /// `auto` (default) is `covering` for brackets of 5 frames or more and `joined` for fewer
-    /// (the best at each count on synthetic brackets with a known truth and on real
-    /// sub-brackets, see docs/accuracy.md); given --samples, --stratify, --fit, --lambda, --hat-margin, --grid or
+    /// (the best at each count on synthetic brackets with a known truth, level with `robust` on
+    /// real sub-brackets, see docs/accuracy.md); given --samples, --stratify, --fit, --lambda, --hat-margin, --grid or
     /// --code-bands it is `robust` at every count, those options applied, and so it is with
     /// `merge --exposures measured` (measuring alternates with the fit).
     /// `robust` rejects clipped, edge and non-monotonic samples and raises N; `noise` is robust

@@ -329,9 +329,9 @@ pub const COVERING_FROM_FRAMES: usize = 5;
 /// The codes between which [`CalibrateOptions::joined`] passes from the grid calibration's
 /// slopes to the covering calibration's ([`CalibrateOptions::toe_from_grid`]). On the oracle's
 /// held-out brackets of 2, 3 and 4 frames the mean sky ratio to the oracle is 1.087 1.059 1.049
-/// (the grid calibration alone 1.172 1.125 1.117); on real 2–4-frame sub-brackets of the 7–11-frame
-/// real sets, against the whole bracket's merge, its toe reads as well as the grid
-/// calibration's or better (docs/accuracy.md, "Eighth round").
+/// (the grid calibration alone 1.172 1.125 1.117); on real 2–4-frame sub-brackets of the
+/// 7–11-frame real sets, against the whole bracket's merge, it reads level with the grid
+/// calibration (docs/accuracy.md, "Eighth round").
 pub const JOINED_TOE: [u8; 2] = [128, 192];
 
 fn is_zero(v: &f64) -> bool {
@@ -474,8 +474,7 @@ impl CalibrateOptions {
     /// [`COVERING_FROM_FRAMES`] frames (`skydome calibrate --method joined`). The covering
     /// curve meets the oracle's sky targets at 2–4 frames but extrapolates the toe below the
     /// codes a sample reads in two frames; the grid calibration reads that toe better on the
-    /// oracle's dim grounds and on real sub-brackets (docs/accuracy.md, "Seventh round" and
-    /// "Eighth round").
+    /// oracle's dim grounds (docs/accuracy.md, "Seventh round" and "Eighth round").
     pub fn joined() -> Self {
         Self {
             toe_from_grid: Some(JOINED_TOE),
@@ -681,11 +680,12 @@ fn joined(
 
 /// `curve` with the toe of `toe` (one channel each, 256 entries, `g(z)` in natural log units):
 /// the slopes `g(z+1) − g(z)` are `toe`'s below code `a`, `curve`'s from code `b` up, blended
-/// linearly between (`a == b`: `toe`'s below `a`); `curve`'s values from `b` up are kept, so
-/// with `b ≥ 128` the gauge `g(128) = 0` is too. Both non-decreasing gives a non-decreasing
-/// result. `a ≤ b ≤ 255`.
+/// linearly between (`a == b`: `toe`'s below `a`), and the result is shifted so that `g(128)`
+/// is `curve`'s (the gauge, 0 in a calibration's curve). Both non-decreasing gives a
+/// non-decreasing result. `a` and `b` are clamped to `a ≤ b ≤` the curves' last code.
 pub fn join_toe(curve: &[f64], toe: &[f64], a: usize, b: usize) -> Vec<f64> {
-    let b = b.min(curve.len().saturating_sub(1));
+    let n = curve.len().min(toe.len());
+    let b = b.min(n.saturating_sub(1));
     let a = a.min(b);
     let mut out = curve.to_vec();
     for z in (0..b).rev() {
@@ -696,6 +696,10 @@ pub fn join_toe(curve: &[f64], toe: &[f64], a: usize, b: usize) -> Vec<f64> {
         };
         let slope = w * (curve[z + 1] - curve[z]) + (1.0 - w) * (toe[z + 1] - toe[z]);
         out[z] = out[z + 1] - slope;
+    }
+    if let (Some(&want), Some(&got)) = (curve.get(GAUGE), out.get(GAUGE)) {
+        let shift = want - got;
+        out.iter_mut().for_each(|v| *v += shift);
     }
     out
 }
