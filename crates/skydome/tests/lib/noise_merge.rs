@@ -1046,7 +1046,7 @@ fn real_sets_calibration_choices() {
                 let (a, b) = crate::oracle::join_spec().unwrap_or((96, 96));
                 let mut jc = response.curves().clone();
                 for (ch, curve) in jc.iter_mut().enumerate() {
-                    *curve = crate::oracle::join_toe(curve, &def.response.curves()[ch], a, b);
+                    *curve = skydome::response::join_toe(curve, &def.response.curves()[ch], a, b);
                 }
                 response = skydome::response::Response::from_curves(jc).unwrap();
             }

@@ -928,11 +928,6 @@ pub fn join_spec() -> Option<(usize, usize)> {
     Some((usize::min(a, 255), usize::min(b, 255)))
 }
 
-/// The library's [`skydome::response::join_toe`], for the benches.
-pub fn join_toe(curve: &[f64], toe: &[f64], a: usize, b: usize) -> Vec<f64> {
-    skydome::response::join_toe(curve, toe, a, b)
-}
-
 /// Tuning bench: every candidate calibration with the noise merge against the oracle and against
 /// the default calibration (noise merge and hat merge), per bracket: sky ratio, dim ground,
 /// clipped sun and the curve's toe/top errors. Seeds from `SKYDOME_ORACLE_SEEDS` (comma
@@ -1029,7 +1024,8 @@ fn calibration_candidates() {
                 if let Some((za, zb)) = join_spec() {
                     let mut curves = cal.response.curves().clone();
                     for (ch, curve) in curves.iter_mut().enumerate() {
-                        *curve = join_toe(curve, &def.response.curves()[ch], za, zb);
+                        *curve =
+                            skydome::response::join_toe(curve, &def.response.curves()[ch], za, zb);
                     }
                     cal.response = skydome::response::Response::from_curves(curves).unwrap();
                 }

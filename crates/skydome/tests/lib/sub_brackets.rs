@@ -109,7 +109,7 @@ pub fn departure(
 }
 
 /// The calibrations compared: the default's grid calibration (`robust`), the covering one,
-/// and the covering curve with the grid's toe blended in ([`crate::oracle::join_toe`]).
+/// and the covering curve with the grid's toe blended in ([`skydome::response::join_toe`]).
 fn calibrations(frames: &[Frame]) -> Vec<(String, Response)> {
     let grid = calibrate(frames, None, &CalibrateOptions::robust())
         .unwrap()
@@ -132,7 +132,7 @@ fn calibrations(frames: &[Frame]) -> Vec<(String, Response)> {
         let (a, b): (usize, usize) = (a.trim().parse().unwrap(), b.trim().parse().unwrap());
         let mut jc = covering.curves().clone();
         for (ch, curve) in jc.iter_mut().enumerate() {
-            *curve = crate::oracle::join_toe(curve, &grid.curves()[ch], a, b);
+            *curve = skydome::response::join_toe(curve, &grid.curves()[ch], a, b);
         }
         out.push((format!("blend {a}-{b}"), Response::from_curves(jc).unwrap()));
     }
