@@ -613,11 +613,15 @@ pub fn calibrate(
     let lt = checked_log_times(frames, opts)?;
     if let Some(toe) = opts.toe_from_grid {
         let g = opts.toe_options();
-        let grid = fit_drawn(sample(frames, circle, &g.sampling)?, &lt, &g)?;
-        let own = sample(frames, circle, &opts.sampling)
-            .map_err(ResponseError::from)
-            .and_then(|s| fit_drawn(s, &lt, opts));
-        return Ok(joined(own, grid, toe));
+        let (grid, own) = side_by_side(
+            || fit_drawn(sample(frames, circle, &g.sampling)?, &lt, &g),
+            || {
+                sample(frames, circle, &opts.sampling)
+                    .map_err(ResponseError::from)
+                    .and_then(|s| fit_drawn(s, &lt, opts))
+            },
+        );
+        return Ok(joined(own, grid?, toe));
     }
     let samples = sample(frames, circle, &opts.sampling)?;
     fit_drawn(samples, &lt, opts)
@@ -635,12 +639,34 @@ pub(crate) fn calibrate_joined_with_samples(
 ) -> Result<Calibration, ResponseError> {
     let lt = checked_log_times(frames, opts)?;
     let g = opts.toe_options();
-    let grid = fit_drawn(grid, &lt, &g)?;
-    let own = own.and_then(|s| fit_drawn(s, &lt, opts));
+    let (grid, own) = side_by_side(
+        || fit_drawn(grid, &lt, &g),
+        || own.and_then(|s| fit_drawn(s, &lt, opts)),
+    );
+    let grid = grid?;
     Ok(match opts.toe_from_grid {
         Some(toe) => joined(own, grid, toe),
         None => own?,
     })
+}
+
+/// `(a(), b())`, the two run side by side with the `parallel` feature, one after the other
+/// without it; the results are the same either way. The joined calibration's two draws and fits
+/// are independent and each is mostly serial (the covering draw's lattice is parallel, its
+/// draw and both fits are not): side by side, the command line's calibrating stage on
+/// 3 × 12 MP with two threads went from 0.042 to 0.034 s (medians of six alternated runs).
+fn side_by_side<A: Send, B: Send>(
+    a: impl FnOnce() -> A + Send,
+    b: impl FnOnce() -> B + Send,
+) -> (A, B) {
+    #[cfg(feature = "parallel")]
+    {
+        rayon::join(a, b)
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        (a(), b())
+    }
 }
 
 /// The draw of [`CalibrateOptions::toe_from_grid`]'s grid calibration for `opts` (the robust
