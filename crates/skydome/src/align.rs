@@ -32,11 +32,21 @@ pub struct AlignOptions {
     /// Largest shift searched, pixels (1..=1024); the pyramid has `⌈log2(max_shift + 1)⌉`
     /// levels. Default 64.
     pub max_shift: u32,
+    /// Shifts in whole pairs of pixels only (default `false`): for frames demosaiced from one
+    /// 2 × 2 colour filter array (a RAW bracket), an odd shift would move the mosaic's phase,
+    /// and the merge, which tells measured photosites from interpolated ones by the first
+    /// frame's phase, would take one for the other. The full-resolution level then tests the
+    /// offsets 0 and ±2 instead of 0 and ±1 (the result is within 1 pixel of the best shift).
+    #[serde(default)]
+    pub even: bool,
 }
 
 impl Default for AlignOptions {
     fn default() -> Self {
-        Self { max_shift: 64 }
+        Self {
+            max_shift: 64,
+            even: false,
+        }
     }
 }
 
@@ -196,12 +206,14 @@ pub fn align(frames: &[Frame], opts: &AlignOptions) -> Alignment {
         let pr = pyramid(rf, q);
         let pf = pyramid(f, q);
         let (mut sx, mut sy) = (0i32, 0i32);
-        for ((a, w, h), (b, _, _)) in pr.iter().zip(&pf).rev() {
+        for (level, ((a, w, h), (b, _, _))) in pr.iter().zip(&pf).enumerate().rev() {
             sx *= 2;
             sy *= 2;
+            // Coarser levels' shifts are doubled, so they are even at full resolution anyway.
+            let step = if opts.even && level == 0 { 2 } else { 1 };
             let mut best = (f64::INFINITY, sx, sy);
-            for dy in -1..=1 {
-                for dx in -1..=1 {
+            for dy in [-step, 0, step] {
+                for dx in [-step, 0, step] {
                     let e = mismatch(a, b, *w, *h, sx + dx, sy + dy);
                     // Ties keep the smaller shift (visited first from the centre outwards
                     // would be fairer; the ±1 grid is small enough that any tie is noise).

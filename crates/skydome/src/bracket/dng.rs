@@ -7,10 +7,11 @@
 //! RGGB) or 34892 (LinearRaw, three samples per pixel, already demosaiced); strips or tiles,
 //! uncompressed (8, 16 or bit-packed 10–14 bits per sample, rows starting on a byte) or
 //! lossless JPEG (compression 7, the "LJ92" of most DNGs, decoded by the `jpeg-decoder`
-//! crate: 1, 3 or 4 components per stream). `LinearizationTable`, `BlackLevel` (per CFA
-//! position), `WhiteLevel`, `ActiveArea`, `ColorMatrix1/2` with their illuminants and
-//! `AsShotNeutral` are applied; exposure time, ISO and f-number come from EXIF as for every
-//! frame. Other compressions (deflate, lossy JPEG, JPEG XL) are refused with a message.
+//! crate: 1, 3 or 4 components per stream; the two-component streams of the Adobe DNG
+//! Converter's Bayer tiles, which it refuses, by our own [`super::ljpeg`]).
+//! `LinearizationTable`, `BlackLevel` (per CFA position), `WhiteLevel`, `ActiveArea`,
+//! `ColorMatrix1/2` with their illuminants and `AsShotNeutral` are applied; exposure time, ISO
+//! and f-number come from EXIF as for every frame. Other compressions (deflate, lossy JPEG, JPEG XL) are refused with a message.
 //!
 //! **Why the IFD walk is our own.** The `tiff` crate (0.11) refuses to open a file whose first
 //! image is a CFA (`UnsupportedError(UnknownInterpretation)` from `Decoder::new`), and no
@@ -634,7 +635,25 @@ fn lossless_jpeg(data: &[u8], cw: usize, ch: usize, spp: usize) -> Result<Vec<u1
         (px, d.info())
     });
     let (px, info) = decoded.map_err(|_| "the lossless JPEG decoder failed on this DNG")?;
-    let px = px.map_err(|e| format!("DNG lossless JPEG: {e}"))?;
+    let px = match px {
+        // Two-component streams (the Adobe DNG Converter's Bayer tiles): our own decoder.
+        Err(jpeg_decoder::Error::Unsupported(
+            jpeg_decoder::UnsupportedFeature::ComponentCount(2),
+        )) => {
+            let want = cw * ch * spp;
+            let d = super::ljpeg::decode(data, want).map_err(|e| format!("DNG {e}"))?;
+            if d.samples.len() < want
+                && (!d.samples.len().is_multiple_of(cw * spp) || d.samples.is_empty())
+            {
+                return Err(format!(
+                    "DNG lossless JPEG holds {} samples, {want} expected",
+                    d.samples.len()
+                ));
+            }
+            return Ok(d.samples);
+        }
+        px => px.map_err(|e| format!("DNG lossless JPEG: {e}"))?,
+    };
     let info = info.ok_or("DNG lossless JPEG without a frame header")?;
     if info.coding_process != jpeg_decoder::CodingProcess::Lossless {
         return Err("DNG tile is a lossy JPEG (only lossless JPEG is read)".into());

@@ -27,6 +27,7 @@ mod checks;
 mod decode;
 pub mod dng;
 mod exif;
+pub mod ljpeg;
 #[cfg(all(feature = "raw-rawler", not(target_arch = "wasm32")))]
 pub mod rawler_reader;
 pub mod tiff;

@@ -151,7 +151,9 @@ pub fn run(
                 let measuring = options.exposures == ExposureSource::Measured;
                 let (mut br, raw, same) =
                     read_bracket_as(input, options.black_level, measuring, &mut progress)?;
-                let alignment = options.align.then(|| align_frames(&mut br));
+                // A RAW bracket's frames share one colour filter array: shifts keep its phase.
+                let mosaic = raw.as_ref().is_some_and(|c| c.cfa.is_some());
+                let alignment = options.align.then(|| align_frames(&mut br, mosaic));
                 let lens = lens_stage(&options.lens, &br, &mut progress)?;
                 let lens_circle = lens.as_ref().map(|(l, _)| l.circle);
                 let calibrated = match &raw {
@@ -324,9 +326,14 @@ pub fn run(
 }
 
 /// Aligns hand-held frames by translation (see [`crate::align`]): the same step
-/// `calibrate --align` runs.
-fn align_frames(br: &mut Bracket) -> Alignment {
-    align::align_bracket(&mut br.frames, &AlignOptions::default())
+/// `calibrate --align` runs. `mosaic`: the frames were demosaiced from one colour filter
+/// array, so the shifts are even ([`AlignOptions::even`]).
+fn align_frames(br: &mut Bracket, mosaic: bool) -> Alignment {
+    let opts = AlignOptions {
+        even: mosaic,
+        ..AlignOptions::default()
+    };
+    align::align_bracket(&mut br.frames, &opts)
 }
 
 /// What the response stage found.

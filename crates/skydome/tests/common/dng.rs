@@ -1,7 +1,8 @@
 #![allow(dead_code)] // the fuzz seeds use `seeds`, the tests `specs`
 //! Small DNGs in every layout `bracket::dng` reads, for the tests and the fuzzers' `read_dng`
 //! corpus (`fuzz/examples/seeds.rs` includes this file): strips and
-//! tiles, 8/16-bit and bit-packed 12/14-bit samples, lossless JPEG (one and three components),
+//! tiles, 8/16-bit and bit-packed 12/14-bit samples, lossless JPEG (one, two and three
+//! components),
 //! LinearRaw, a linearisation table, a 2 × 2 black-level pattern, an active area, the raw image
 //! in a SubIFD, both byte orders. Written by hand (a few tags, one IFD or two) because the seeds
 //! must reach every branch of the reader, which the `tiff` crate's writer does not produce.
@@ -23,6 +24,9 @@ pub enum Layout {
     Tiles { w: usize, h: usize },
     /// Lossless JPEG tiles (compression 7).
     Ljpeg { w: usize, h: usize },
+    /// Lossless JPEG tiles whose JPEG pixels hold two photosites each (a `w / 2 × h` image of
+    /// two components), as the Adobe DNG Converter writes Bayer tiles.
+    LjpegPairs { w: usize, h: usize },
 }
 
 /// A DNG to build.
@@ -137,6 +141,44 @@ fn raw_chunk(spec: &Spec, cx: usize, cy: usize, cw: usize, ch: usize) -> Vec<u8>
 /// A lossless JPEG (SOF3, predictor 1, one Huffman table whose 17 categories all have 5-bit
 /// codes) of `comps` interleaved components, `w × h` pixels.
 pub fn ljpeg(samples: &[u16], w: usize, h: usize, comps: usize, bits: usize) -> Vec<u8> {
+    ljpeg_with(
+        samples,
+        w,
+        h,
+        comps,
+        bits,
+        Coding {
+            predictor: 1,
+            pt: 0,
+            restart_rows: 0,
+        },
+    )
+}
+
+/// How [`ljpeg_with`] codes: predictor (1–7, T.81 table H.1), point transform `pt` (the samples
+/// must be multiples of `2^pt`), and a restart marker after every `restart_rows` rows when that
+/// is not 0.
+#[derive(Clone, Copy)]
+pub struct Coding {
+    pub predictor: u8,
+    pub pt: usize,
+    pub restart_rows: usize,
+}
+
+/// As [`ljpeg`], coded as `coding` says.
+pub fn ljpeg_with(
+    samples: &[u16],
+    w: usize,
+    h: usize,
+    comps: usize,
+    bits: usize,
+    coding: Coding,
+) -> Vec<u8> {
+    let Coding {
+        predictor,
+        pt,
+        restart_rows,
+    } = coding;
     let mut o = vec![0xFF, 0xD8];
     // SOF3.
     o.extend_from_slice(&[0xFF, 0xC3]);
@@ -156,14 +198,18 @@ pub fn ljpeg(samples: &[u16], w: usize, h: usize, comps: usize, bits: usize) -> 
     counts[4] = 17;
     o.extend_from_slice(&counts);
     o.extend(0..17u8);
-    // SOS: predictor 1, point transform 0.
+    if restart_rows > 0 {
+        o.extend_from_slice(&[0xFF, 0xDD, 0, 4]);
+        o.extend_from_slice(&((restart_rows * w) as u16).to_be_bytes());
+    }
+    // SOS.
     o.extend_from_slice(&[0xFF, 0xDA]);
     o.extend_from_slice(&((6 + 2 * comps) as u16).to_be_bytes());
     o.push(comps as u8);
     for c in 0..comps {
         o.extend_from_slice(&[c as u8 + 1, 0x00]);
     }
-    o.extend_from_slice(&[1, 0, 0]);
+    o.extend_from_slice(&[predictor, 0, pt as u8]);
     // Entropy-coded data (0xFF bytes stuffed with 0x00).
     struct Bits {
         out: Vec<u8>,
@@ -189,14 +235,39 @@ pub fn ljpeg(samples: &[u16], w: usize, h: usize, comps: usize, bits: usize) -> 
         acc: 0,
         have: 0,
     };
-    let at = |x: usize, y: usize, c: usize| i32::from(samples[(y * w + x) * comps + c]);
+    let at = |x: usize, y: usize, c: usize| i32::from(samples[(y * w + x) * comps + c] >> pt);
+    let pad = |b: &mut Bits| {
+        if b.have > 0 {
+            let n = 8 - b.have;
+            b.put((1 << n) - 1, n);
+        }
+    };
     for y in 0..h {
+        // The first row of the image or of a restart interval.
+        let first = y == 0 || (restart_rows > 0 && y % restart_rows == 0);
+        if y > 0 && first {
+            pad(&mut bits_out);
+            let k = (y / restart_rows - 1) % 8;
+            bits_out.out.extend_from_slice(&[0xFF, 0xD0 + k as u8]);
+        }
         for x in 0..w {
             for c in 0..comps {
-                let pred = match (x, y) {
-                    (0, 0) => 1 << (bits - 1),
-                    (0, _) => at(0, y - 1, c),
-                    _ => at(x - 1, y, c),
+                let pred = match (x, first) {
+                    (0, true) => 1 << (bits - pt - 1),
+                    (_, true) => at(x - 1, y, c),
+                    (0, false) => at(0, y - 1, c),
+                    _ => {
+                        let (ra, rb, rc) = (at(x - 1, y, c), at(x, y - 1, c), at(x - 1, y - 1, c));
+                        match predictor {
+                            1 => ra,
+                            2 => rb,
+                            3 => rc,
+                            4 => ra + rb - rc,
+                            5 => ra + ((rb - rc) >> 1),
+                            6 => rb + ((ra - rc) >> 1),
+                            _ => (ra + rb) >> 1,
+                        }
+                    }
                 };
                 let mut d = (at(x, y, c) - pred) as i16 as i32;
                 if d == -32768 {
@@ -216,10 +287,7 @@ pub fn ljpeg(samples: &[u16], w: usize, h: usize, comps: usize, bits: usize) -> 
         }
     }
     // Pad the last byte with ones.
-    if bits_out.have > 0 {
-        let n = 8 - bits_out.have;
-        bits_out.put((1 << n) - 1, n);
-    }
+    pad(&mut bits_out);
     let bitbuf = bits_out.out;
     o.extend(bitbuf);
     o.extend_from_slice(&[0xFF, 0xD9]);
@@ -270,7 +338,7 @@ pub fn dng(spec: &Spec) -> Vec<u8> {
     let (cw, ch, compression) = match spec.layout {
         Layout::Strips { rows } => (spec.width, rows, 1u16),
         Layout::Tiles { w, h } => (w, h, 1),
-        Layout::Ljpeg { w, h } => (w, h, 7),
+        Layout::Ljpeg { w, h } | Layout::LjpegPairs { w, h } => (w, h, 7),
     };
     let across = spec.width.div_ceil(cw);
     let down = spec.height.div_ceil(ch);
@@ -282,7 +350,7 @@ pub fn dng(spec: &Spec) -> Vec<u8> {
             _ => ch,
         };
         chunks.push(match spec.layout {
-            Layout::Ljpeg { .. } => {
+            Layout::Ljpeg { .. } | Layout::LjpegPairs { .. } => {
                 let s: Vec<u16> = (0..rows)
                     .flat_map(|y| {
                         (0..cw).flat_map(move |x| {
@@ -297,7 +365,10 @@ pub fn dng(spec: &Spec) -> Vec<u8> {
                         })
                     })
                     .collect();
-                ljpeg(&s, cw, rows, spec.spp, spec.bits)
+                match spec.layout {
+                    Layout::LjpegPairs { .. } => ljpeg(&s, cw / 2, rows, 2, spec.bits),
+                    _ => ljpeg(&s, cw, rows, spec.spp, spec.bits),
+                }
             }
             _ => raw_chunk(spec, cx, cy, cw, rows),
         });
@@ -545,6 +616,13 @@ pub fn specs() -> Vec<(&'static str, Spec)> {
             white: 65000,
             active_area: Some([2, 2, 12, 16]),
             ..Spec::cfa(18, 14, 12, Layout::Strips { rows: 14 })
+        },
+    );
+    add(
+        "ljpeg_pairs14",
+        Spec {
+            sub_ifd: true,
+            ..Spec::cfa(20, 12, 14, Layout::LjpegPairs { w: 16, h: 8 })
         },
     );
     add(

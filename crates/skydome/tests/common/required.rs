@@ -112,3 +112,33 @@ pub fn radiance_tools() -> Option<(PathBuf, PathBuf)> {
     );
     None
 }
+
+/// The switch that turns a missing real RAW bracket into a failure.
+pub const REQUIRE_RAW_BRACKET: &str = "SKYDOME_REQUIRE_RAW_BRACKET";
+
+/// The folder of the real RAW bracket (HDRMerge's `sample1.dng`–`sample3.dng`, fetched from
+/// Debian by `scripts/fetch-raw-bracket.sh`): `$SKYDOME_RAW_BRACKET_DIR`, default
+/// `target/raw-bracket-hdrmerge` in the workspace, or `None` after reporting the skip (a
+/// failure when `SKYDOME_REQUIRE_RAW_BRACKET=1`).
+#[track_caller]
+pub fn raw_bracket() -> Option<PathBuf> {
+    let d = std::env::var_os("SKYDOME_RAW_BRACKET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/raw-bracket-hdrmerge")
+        });
+    if ["sample1.dng", "sample2.dng", "sample3.dng"]
+        .iter()
+        .all(|f| d.join(f).is_file())
+    {
+        return Some(d);
+    }
+    skip(
+        REQUIRE_RAW_BRACKET,
+        &format!(
+            "{} lacks the real RAW bracket (run scripts/fetch-raw-bracket.sh)",
+            d.display()
+        ),
+    );
+    None
+}

@@ -50,6 +50,50 @@ fn known_synthetic_shifts_are_recovered_exactly() {
     }
 }
 
+/// With `even` (a RAW bracket's frames, demosaiced from one colour filter array) every shift is
+/// even, so the mosaic's phase is kept: an even true shift is found exactly, an odd one as an
+/// even neighbour (within 1 pixel in each direction).
+#[test]
+fn even_shifts_keep_a_mosaic_phase() {
+    let b = generate(&SynthOptions {
+        width: 320,
+        height: 256,
+        seed: 4,
+        evs: vec![-1.0, 0.0, 1.0],
+        jpeg_quality: Some(90),
+        ..SynthOptions::default()
+    })
+    .unwrap();
+    let even = AlignOptions {
+        even: true,
+        ..AlignOptions::default()
+    };
+    for shifts in [[(4, -6), (-10, 2)], [(5, -3), (-7, 2)], [(1, 1), (-3, 0)]] {
+        let mut frames = b.frames.clone();
+        frames[0] = shifted(&b.frames[0], shifts[0].0, shifts[0].1);
+        frames[2] = shifted(&b.frames[2], shifts[1].0, shifts[1].1);
+        let plain = align(&frames, &AlignOptions::default());
+        let a = align(&frames, &even);
+        println!(
+            "truth {shifts:?}: found {:?}, even {:?}",
+            plain.shifts, a.shifts
+        );
+        assert_eq!(plain.shifts, vec![shifts[0], (0, 0), shifts[1]]);
+        for (&(fx, fy), &(tx, ty)) in [a.shifts[0], a.shifts[2]].iter().zip(&shifts) {
+            assert!(fx % 2 == 0 && fy % 2 == 0, "{:?}", a.shifts);
+            assert!(
+                (fx - tx).abs() <= 1 && (fy - ty).abs() <= 1,
+                "{:?}",
+                a.shifts
+            );
+            if tx % 2 == 0 && ty % 2 == 0 {
+                assert_eq!((fx, fy), (tx, ty));
+            }
+        }
+        assert_eq!(a.shifts[1], (0, 0));
+    }
+}
+
 /// The worst frame's median `|log2(E_frame / E_merged)|` ([`common::frame_consistency`]).
 fn worst_frame_consistency(frames: &[Frame], r: &Response) -> f64 {
     let m = merge(frames, r, &MergeOptions::default()).unwrap();

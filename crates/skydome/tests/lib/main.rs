@@ -38,6 +38,7 @@ mod pipeline;
 mod plot;
 mod raw;
 mod raw_rawler;
+mod raw_real;
 mod render;
 mod reproducible;
 mod reproject;

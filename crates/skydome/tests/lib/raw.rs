@@ -364,7 +364,7 @@ fn malformed_dngs_give_one_line_errors() {
 }
 
 /// Hand-built DNGs in every layout the reader takes (strips, tiles, 8/16-bit, packed 12/14-bit,
-/// lossless JPEG with one and three components, LinearRaw, a linearisation table, a 2 × 2
+/// lossless JPEG with one, two and three components, LinearRaw, a linearisation table, a 2 × 2
 /// black-level pattern, an active area, a SubIFD, big-endian) decode to the values written:
 /// every measured photosite equals `(lin(raw) − black) / (white − black)` within one 16-bit code.
 #[test]

@@ -145,6 +145,20 @@ mod with_rawler {
         compare("tinydng_colorchart.dng", &bytes, 2.0 / 63486.0);
     }
 
+    /// The real RAW bracket (`scripts/fetch-raw-bracket.sh`): Adobe-converted DNGs whose
+    /// lossless JPEG tiles have two components, which our own decoder reads
+    /// (`bracket::ljpeg`); rawler's decoder is the independent reference.
+    #[test]
+    fn the_real_raw_bracket_through_rawler_equals_our_dng_reader() {
+        let Some(dir) = crate::common::required::raw_bracket() else {
+            return;
+        };
+        for name in ["sample1.dng", "sample2.dng", "sample3.dng"] {
+            let bytes = std::fs::read(dir.join(name)).unwrap();
+            assert_eq!(compare(name, &bytes, 0.0), 0.0);
+        }
+    }
+
     #[test]
     fn synthetic_dngs_through_rawler_equal_our_dng_reader() {
         for (seed, cfa, neutral) in [
