@@ -547,6 +547,13 @@ fn read_samples(
     if cw == 0 || ch == 0 {
         return Err("DNG tile or strip of zero size".into());
     }
+    // A chunk's samples are allocated before they are decoded: a tile far larger than the image
+    // (a damaged TileWidth/TileLength) must not reserve gigabytes.
+    if cw.saturating_mul(ch) > w.saturating_mul(h).saturating_mul(4).max(65_536) {
+        return Err(format!(
+            "DNG tile of {cw} × {ch} pixels for a {w} × {h} image (damaged tile size?)"
+        ));
+    }
     let across = w.div_ceil(cw);
     let down = h.div_ceil(ch);
     if offsets.len() < across * down || counts.len() < offsets.len() {
@@ -629,18 +636,37 @@ fn unpack(
 fn lossless_jpeg(data: &[u8], cw: usize, ch: usize, spp: usize) -> Result<Vec<u16>, String> {
     // The decoder is third-party code fed with untrusted bytes: a panic in it must not take
     // the process down.
+    let want = cw * ch * spp;
     let decoded = std::panic::catch_unwind(|| {
         let mut d = jpeg_decoder::Decoder::new(data);
+        // The decoder allocates what its frame header announces (up to 65535 × 65535 pixels);
+        // a header announcing more samples than the chunk holds is damage, refused before that.
+        if let Ok(()) = d.read_info() {
+            if let Some(i) = d.info() {
+                let comps = match i.pixel_format {
+                    jpeg_decoder::PixelFormat::L8 | jpeg_decoder::PixelFormat::L16 => 1,
+                    jpeg_decoder::PixelFormat::RGB24 => 3,
+                    _ => 4,
+                };
+                let announced = usize::from(i.width) * usize::from(i.height) * comps;
+                if announced > want {
+                    return Err(announced);
+                }
+            }
+        }
         let px = d.decode();
-        (px, d.info())
+        Ok((px, d.info()))
     });
-    let (px, info) = decoded.map_err(|_| "the lossless JPEG decoder failed on this DNG")?;
+    let (px, info) = decoded
+        .map_err(|_| "the lossless JPEG decoder failed on this DNG".to_string())?
+        .map_err(|n| {
+            format!("DNG lossless JPEG announces {n} samples for a chunk of {want} (damaged?)")
+        })?;
     let px = match px {
         // Two-component streams (the Adobe DNG Converter's Bayer tiles): our own decoder.
         Err(jpeg_decoder::Error::Unsupported(
             jpeg_decoder::UnsupportedFeature::ComponentCount(2),
         )) => {
-            let want = cw * ch * spp;
             let d = super::ljpeg::decode(data, want).map_err(|e| format!("DNG {e}"))?;
             if d.samples.len() < want
                 && (!d.samples.len().is_multiple_of(cw * spp) || d.samples.is_empty())
@@ -671,7 +697,6 @@ fn lossless_jpeg(data: &[u8], cw: usize, ch: usize, spp: usize) -> Result<Vec<u1
     } else {
         px.iter().map(|&b| u16::from(b)).collect()
     };
-    let want = cw * ch * spp;
     if samples.len() < want {
         // The last strip of an image may be short.
         if !samples.len().is_multiple_of(cw * spp) || samples.is_empty() {

@@ -428,3 +428,48 @@ fn dngs_in_every_layout_decode_to_the_values_written() {
         assert!(worst <= 1.0 / 63486.0, "{name}: off by {worst:e}");
     }
 }
+
+/// Damaged sizes are refused before anything is allocated for them: a lossless JPEG tile whose
+/// frame header announces 65535 × 65535 pixels (the decoder would reserve 8 GB; fuzzing
+/// `read_dng` found a smaller one that reserved 1.8 GB) and a tile size far beyond the image's.
+#[test]
+fn a_tile_header_announcing_more_pixels_than_the_tile_is_refused() {
+    use crate::dng_build::{dng, Layout, Spec};
+    let good = dng(&Spec::cfa(20, 12, 14, Layout::Ljpeg { w: 16, h: 8 }));
+    let opts = DecodeOptions::default();
+    assert!(bracket::decode("ok.dng", &good, &opts).is_ok());
+
+    // Every SOF3 header (FF C3, length, precision, then height and width) set to 65535 × 65535.
+    let mut big = good.clone();
+    let mut patched = 0;
+    for i in 0..big.len() - 9 {
+        if big[i] == 0xFF && big[i + 1] == 0xC3 {
+            big[i + 5..i + 9].copy_from_slice(&[0xFF; 4]);
+            patched += 1;
+        }
+    }
+    assert!(patched >= 2, "{patched} lossless JPEG tiles found");
+    let m = bracket::decode("big.dng", &big, &opts)
+        .expect_err("a frame header larger than its tile is refused")
+        .to_string();
+    assert!(m.starts_with("big.dng: ") && m.contains("announces"), "{m}");
+    assert!(!m.contains('\n'), "{m}");
+
+    // TileWidth (322) set to 65535: a 65535 × 8 tile for a 20 × 12 image.
+    let mut wide = good.clone();
+    let ifd = u32::from_le_bytes([wide[4], wide[5], wide[6], wide[7]]) as usize;
+    let count = u16::from_le_bytes([wide[ifd], wide[ifd + 1]]) as usize;
+    let mut found = false;
+    for i in 0..count {
+        let e = ifd + 2 + 12 * i;
+        if u16::from_le_bytes([wide[e], wide[e + 1]]) == 322 {
+            wide[e + 8..e + 12].copy_from_slice(&[0xFF, 0xFF, 0, 0]);
+            found = true;
+        }
+    }
+    assert!(found, "TileWidth tag in IFD0");
+    let m = bracket::decode("wide.dng", &wide, &opts)
+        .expect_err("a tile far larger than the image is refused")
+        .to_string();
+    assert!(m.starts_with("wide.dng: ") && m.contains("tile of 65535"), "{m}");
+}
