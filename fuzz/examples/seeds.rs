@@ -136,6 +136,34 @@ fn main() {
     for (name, bytes) in dng::seeds() {
         put("read_dng", &format!("{name}.dng"), &bytes);
     }
+    // Bare lossless JPEG streams for `bracket::ljpeg`: every predictor, a point transform,
+    // restart intervals, one to three components, 8 to 16 bits.
+    for (predictor, pt, restart_rows, comps, bits) in [
+        (1, 0, 0, 1, 16),
+        (2, 0, 0, 2, 14),
+        (3, 0, 2, 2, 12),
+        (4, 0, 0, 3, 8),
+        (5, 1, 0, 2, 14),
+        (6, 0, 3, 1, 12),
+        (7, 2, 0, 2, 16),
+    ] {
+        let (lw, lh) = (6, 5);
+        // Scattered codes within `bits`, multiples of 2^pt (what the point transform keeps).
+        let mask = (((1u32 << bits) - 1) >> pt << pt) as usize;
+        let samples: Vec<u16> = (0..lw * lh * comps)
+            .map(|i| ((i.wrapping_mul(2_654_435_761) >> 7) & mask) as u16)
+            .collect();
+        let coding = dng::Coding {
+            predictor,
+            pt,
+            restart_rows,
+        };
+        put(
+            "ljpeg",
+            &format!("p{predictor}_pt{pt}_r{restart_rows}_c{comps}_{bits}bit.ljpeg"),
+            &dng::ljpeg_with(&samples, lw, lh, comps, bits, coding),
+        );
+    }
     put("times", "iso8601", b"2026-06-21T14:30:05+02:00");
 
     let mut p = CameraProfile::linear();

@@ -94,6 +94,20 @@ fn check_raw_frame(frame: &bracket::DecodedFrame, colour: &bracket::RawColour) {
     }
 }
 
+/// A bare lossless JPEG stream (SOF3: every predictor, point transform, restart intervals, one
+/// to four components) through `bracket::ljpeg`, our decoder of DNG tiles with two components,
+/// asked for at most 4 Mi samples (a 1 MP CFA tile set): it must keep to that many.
+pub fn ljpeg(data: &[u8]) {
+    let max = 4 * MAX_PIXELS as usize;
+    if let Ok(d) = bracket::ljpeg::decode(data, max) {
+        assert!(d.samples.len() <= max, "more samples than asked for");
+        assert!(
+            d.samples.len() <= d.width * d.height * d.components,
+            "more samples than the frame header announces"
+        );
+    }
+}
+
 /// A Radiance `.hdr` (RGBE or XYZE, flat or run-length encoded, any header), as `compare` and
 /// `info` read it.
 pub fn read_hdr(data: &[u8]) {

@@ -35,6 +35,11 @@ fn read_dng_corpus_replays() {
 }
 
 #[test]
+fn ljpeg_corpus_replays() {
+    replay("ljpeg", targets::ljpeg);
+}
+
+#[test]
 fn read_hdr_corpus_replays() {
     replay("read_hdr", targets::read_hdr);
 }
