@@ -147,11 +147,11 @@ fn main() {
         (6, 0, 3, 1, 12),
         (7, 2, 0, 2, 16),
     ] {
-        let (lw, lh) = (6, 5);
+        let (lw, lh) = (6usize, 5usize);
         // Scattered codes within `bits`, multiples of 2^pt (what the point transform keeps).
         let mask = (((1u32 << bits) - 1) >> pt << pt) as usize;
         let samples: Vec<u16> = (0..lw * lh * comps)
-            .map(|i| ((i.wrapping_mul(2_654_435_761) >> 7) & mask) as u16)
+            .map(|i: usize| ((i.wrapping_mul(2_654_435_761) >> 7) & mask) as u16)
             .collect();
         let coding = dng::Coding {
             predictor,

@@ -641,17 +641,20 @@ fn lossless_jpeg(data: &[u8], cw: usize, ch: usize, spp: usize) -> Result<Vec<u1
         let mut d = jpeg_decoder::Decoder::new(data);
         // The decoder allocates what its frame header announces (up to 65535 × 65535 pixels);
         // a header announcing more samples than the chunk holds is damage, refused before that.
-        if let Ok(()) = d.read_info() {
-            if let Some(i) = d.info() {
-                let comps = match i.pixel_format {
-                    jpeg_decoder::PixelFormat::L8 | jpeg_decoder::PixelFormat::L16 => 1,
-                    jpeg_decoder::PixelFormat::RGB24 => 3,
-                    _ => 4,
-                };
-                let announced = usize::from(i.width) * usize::from(i.height) * comps;
-                if announced > want {
-                    return Err(announced);
-                }
+        // (After a failed `read_info` the decoder cannot start again: its error is the answer,
+        // a two-component stream's included.)
+        if let Err(e) = d.read_info() {
+            return Ok((Err(e), None));
+        }
+        if let Some(i) = d.info() {
+            let comps = match i.pixel_format {
+                jpeg_decoder::PixelFormat::L8 | jpeg_decoder::PixelFormat::L16 => 1,
+                jpeg_decoder::PixelFormat::RGB24 => 3,
+                _ => 4,
+            };
+            let announced = usize::from(i.width) * usize::from(i.height) * comps;
+            if announced > want {
+                return Err(announced);
             }
         }
         let px = d.decode();

@@ -471,5 +471,8 @@ fn a_tile_header_announcing_more_pixels_than_the_tile_is_refused() {
     let m = bracket::decode("wide.dng", &wide, &opts)
         .expect_err("a tile far larger than the image is refused")
         .to_string();
-    assert!(m.starts_with("wide.dng: ") && m.contains("tile of 65535"), "{m}");
+    assert!(
+        m.starts_with("wide.dng: ") && m.contains("tile of 65535"),
+        "{m}"
+    );
 }
