@@ -3,10 +3,10 @@
 //! and without EXIF, `.hdr` and `.exr` files in every encoding skydome writes, time lists and
 //! profiles. libFuzzer grows and minimises the corpus from them.
 
-#[path = "../../crates/skydome/tests/common/encode.rs"]
-mod encode;
 #[path = "../../crates/skydome/tests/common/dng.rs"]
 mod dng;
+#[path = "../../crates/skydome/tests/common/encode.rs"]
+mod encode;
 
 use std::path::Path;
 
