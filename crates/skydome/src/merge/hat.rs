@@ -1,8 +1,8 @@
 //! The hat merge: per-frame look-up tables of `(w, w · log2 E_j)`, summed a few frames at a
 //! time over bands of rows, then the clipped-pixel flags and the confidence of each row.
 
-use super::refine::{refine_row, Refine, Scratch};
-use super::{code_tables, fast_exp2, Code, Frame, Weighting};
+use super::refine::{refine_row, Scratch};
+use super::{code_tables, fast_exp2, Code, Frame, Refinement, Weighting};
 use super::{BLACK, CLIPPED_HIGH, CLIPPED_LOW, RELEASE_BANDS, ROWS_PER_BAND};
 
 /// Peak of the 8-bit hat: the full weight.
@@ -89,7 +89,7 @@ type Band<'a> = (usize, &'a mut [f32], &'a mut [f32], &'a mut [u8]);
 pub(super) fn run_bands<T: Code, const N: usize>(
     srcs: &[&[T]],
     luts: &Tables<N>,
-    refine: Option<&Refine<N>>,
+    refine: Option<&Refinement<N>>,
     w: usize,
     black: T,
     out: &mut [f32],
@@ -132,7 +132,7 @@ pub(super) fn run_bands<T: Code, const N: usize>(
 pub(super) fn run_releasing<T: Code, const N: usize>(
     frames: &mut [Frame],
     luts: &Tables<N>,
-    refine: Option<&Refine<N>>,
+    refine: Option<&Refinement<N>>,
     w: usize,
     black: T,
     out: &mut [f32],
@@ -299,7 +299,7 @@ fn accumulate_group<T: Code, const N: usize, const MODE: u8>(
 fn merge_band<T: Code, const N: usize>(
     srcs: &[&[T]],
     luts: &Tables<N>,
-    refine: Option<&Refine<N>>,
+    refine: Option<&Refinement<N>>,
     w: usize,
     black: T,
     off: usize,
@@ -346,7 +346,7 @@ fn merge_band<T: Code, const N: usize>(
                         *o /= d;
                     }
                 }
-                refine_row(&tails, r, &mut scratch, orest);
+                refine_row(&tails, &r.scalar, &mut scratch, orest);
             }
             None => finish_row(orest, drest),
         }

@@ -440,6 +440,16 @@ fn noise_estimate(
     })
 }
 
+/// The noise-aware merge's refinement of each row after the hat pass: the vector kernel
+/// ([`fused::Fused`], where the CPU has one and the input is 8-bit) takes whole steps of eight
+/// pixels, the scalar [`Refine`] the rest, with the same bits.
+struct Refinement<const N: usize> {
+    /// The scalar refinement, whose tables the kernel copies.
+    scalar: Refine<N>,
+    /// The vector kernel, built from `scalar` and the hat's tables.
+    fused: Option<fused::Fused>,
+}
+
 /// The merge of frames whose samples are of type `T` (`N` codes): the hat merge, then the
 /// noise-model refinement and the consistency test when asked for.
 fn merge_codes<T: Code, const N: usize>(
@@ -464,9 +474,9 @@ fn merge_codes<T: Code, const N: usize>(
     // The noise-aware merge refines each row right after the hat has merged it (one pass).
     let refine = match (opts.weighting, &noise_est) {
         (Weighting::Noise, Some(e)) => {
-            let mut r = Refine::<N>::new(lt, response, &e.model, opts.black_level, g);
-            r.fused = fused::Fused::new(&r, |j, c, z| luts.entry(j, c, z));
-            Some(r)
+            let scalar = Refine::<N>::new(lt, response, &e.model, opts.black_level, g);
+            let fused = fused::Fused::new(&scalar, |j, c, z| luts.entry(j, c, z));
+            Some(Refinement { scalar, fused })
         }
         _ => None,
     };
@@ -597,7 +607,7 @@ trait Code: Copy + Sync + PartialOrd {
     fn black(level: u8) -> Self;
     /// Merges what the noise-aware merge's vector kernel can of one row (see
     /// [`fused::Fused::row`]); returns how many samples that was, from the row's start.
-    fn fused_row<const N: usize>(rows: &[&[Self]], r: &Refine<N>, out: &mut [f32]) -> usize;
+    fn fused_row<const N: usize>(rows: &[&[Self]], r: &Refinement<N>, out: &mut [f32]) -> usize;
 }
 
 impl Code for u8 {
@@ -624,7 +634,7 @@ impl Code for u8 {
     fn black(level: u8) -> Self {
         level
     }
-    fn fused_row<const N: usize>(rows: &[&[Self]], r: &Refine<N>, out: &mut [f32]) -> usize {
+    fn fused_row<const N: usize>(rows: &[&[Self]], r: &Refinement<N>, out: &mut [f32]) -> usize {
         r.fused.as_ref().map_or(0, |f| f.row(rows, out))
     }
 }
@@ -657,7 +667,7 @@ impl Code for u16 {
             b => (b as u32 * 257 + 128).min(65535) as u16,
         }
     }
-    fn fused_row<const N: usize>(_: &[&[Self]], _: &Refine<N>, _: &mut [f32]) -> usize {
+    fn fused_row<const N: usize>(_: &[&[Self]], _: &Refinement<N>, _: &mut [f32]) -> usize {
         // The kernel is for 8-bit codes (its tables would not stay in cache at 16 bits).
         0
     }

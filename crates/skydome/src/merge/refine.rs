@@ -2,7 +2,6 @@
 //! which re-weights every vote by the noise of the code its frame was expected to read.
 
 use super::consistency::LOWER_BOUND_CODE;
-use super::fused::Fused;
 use super::{code_tables, fast_exp2, Code};
 use crate::noise::{self, NoiseModel};
 use crate::response::{Response, LEVELS};
@@ -42,9 +41,6 @@ pub(super) struct Refine<const N: usize> {
     pub(super) last: [f32; 3],
     /// Per channel: its first row's index in `rows` (in rows).
     pub(super) start: [i32; 3],
-    /// The vector kernel that merges 8-bit rows in one sweep with the same bits, where the CPU
-    /// has one (set by the merge once it has the hat's tables; see [`Fused`]).
-    pub(super) fused: Option<Fused>,
 }
 
 impl<const N: usize> Refine<N> {
@@ -123,7 +119,6 @@ impl<const N: usize> Refine<N> {
             off,
             last,
             start,
-            fused: None,
         }
     }
 }
