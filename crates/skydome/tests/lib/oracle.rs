@@ -866,7 +866,7 @@ pub fn curve_error(case: &Case, g: &[Vec<f64>; 3]) -> [f64; 4] {
 /// The calibrations tried while choosing the default's (see [`calibration_candidates`]):
 /// `SKYDOME_ORACLE_CANDIDATES`, `;`-separated, each a `,`-separated list of `key=value` on top
 /// of [`CalibrateOptions::noise_fit`] (keys `samples`, `cover`, `stratify`, `lo`, `hi`,
-/// `lambda`, `margin`, `bands`, `fit`, `patch`, `cut`, `join` (`a-b`: the grid
+/// `lambda`, `margin`, `bands`, `fit`, `patch`, `cut`, `periodic` (`1`: [`CalibrateOptions::step_periodic`]), `join` (`a-b`: the grid
 /// calibration's toe, [`CalibrateOptions::toe_from_grid`]); `covering=1` starts again from
 /// [`CalibrateOptions::covering`], so put it first); `noise_fit` alone without the variable.
 /// The keys of [`Candidate`]'s wide-step rules are accepted and dropped here.
@@ -945,6 +945,7 @@ pub fn candidate_rules() -> Vec<Candidate> {
                 "wdrop" => c.wide_drop = Some(f as f32),
                 "wtwo" => c.wide_two_stage = Some(f as f32),
                 "wpair" => c.wide_pair = Some(f as f32),
+                "periodic" => o.step_periodic = f != 0.0,
                 other => panic!("unknown key {other}"),
             }
         }
@@ -955,12 +956,8 @@ pub fn candidate_rules() -> Vec<Candidate> {
 
 /// The mean step of a bracket, EV: `(ln Δt_last − ln Δt_first) / (P − 1) / ln 2`.
 pub fn mean_step_ev(frames: &[Frame]) -> f64 {
-    let n = frames.len();
-    if n < 2 {
-        return 0.0;
-    }
-    let lt = |f: &Frame| f.exposure.relative().ln();
-    (lt(&frames[n - 1]) - lt(&frames[0])) / (n - 1) as f64 / std::f64::consts::LN_2
+    let lt: Vec<f64> = frames.iter().map(|f| f.exposure.relative().ln()).collect();
+    skydome::response::mean_step_ev(&lt)
 }
 
 /// Calibrates `frames` with `cand` (its wide-step rules applied where the bracket's mean step
@@ -1110,8 +1107,21 @@ fn calibration_candidates() {
             let floor = rms3(eo);
             let orc_sun = median_offset(&orc, &c.truth, &sun, eo);
             let eval = |cal: &skydome::response::Calibration, w: Weighting| {
+                // The merge's noise model as the pipeline fits it for this calibration
+                // (from code 24 up where the step-periodic correction applied).
+                let noise = (w == Weighting::Noise && cal.wide_step).then(|| {
+                    skydome::noise::estimate_for_calibration(
+                        &c.frames,
+                        &cal.response,
+                        0,
+                        None,
+                        true,
+                    )
+                    .model
+                });
                 let opts = MergeOptions {
                     weighting: w,
+                    noise,
                     ..MergeOptions::default()
                 };
                 let img = merge(&c.frames, &cal.response, &opts).unwrap().radiance;
