@@ -920,12 +920,14 @@ fn solve_small(mut a: [[f64; 7]; 7], mut b: [f64; 7]) -> Option<[f64; 7]> {
         }
         a.swap(col, piv);
         b.swap(col, piv);
-        for r in col + 1..7 {
-            let f = a[r][col] / a[col][col];
-            for k in col..7 {
-                a[r][k] -= f * a[col][k];
+        let (pivot, below) = a.split_at_mut(col + 1);
+        let prow = &pivot[col];
+        for (k, row) in below.iter_mut().enumerate() {
+            let f = row[col] / prow[col];
+            for (v, p) in row.iter_mut().zip(prow).skip(col) {
+                *v -= f * p;
             }
-            b[r] -= f * b[col];
+            b[col + 1 + k] -= f * b[col];
         }
     }
     let mut x = [0.0; 7];

@@ -601,7 +601,10 @@ fn raw_merge_stage(
 /// The merge stage: linear radiance from the frames, whose pixels are given back as the merge
 /// goes (nothing after it reads them, so the frames and the radiance are never both whole in
 /// memory). Black pixels and disagreement are judged inside the lens circle when there is one
-/// (the housing outside is black in every frame by design).
+/// (the housing outside is black in every frame by design). `wide_step`: the calibration's
+/// step-periodic correction applied, so a fitted noise model is fitted from code 24 up
+/// ([`noise::estimate_for_calibration`]).
+#[allow(clippy::too_many_arguments)]
 fn merge_stage(
     options: &Options,
     br: &mut Bracket,

@@ -1108,8 +1108,11 @@ fn calibration_candidates() {
             let orc_sun = median_offset(&orc, &c.truth, &sun, eo);
             let eval = |cal: &skydome::response::Calibration, w: Weighting| {
                 // The merge's noise model as the pipeline fits it for this calibration
-                // (from code 24 up where the step-periodic correction applied).
-                let noise = (w == Weighting::Noise && cal.wide_step).then(|| {
+                // (from code 24 up where the step-periodic correction applied;
+                // `SKYDOME_ORACLE_WIDE_NOISE=0` keeps the whole fit, to tell the two apart).
+                let whole_noise =
+                    std::env::var("SKYDOME_ORACLE_WIDE_NOISE").is_ok_and(|v| v == "0");
+                let noise = (w == Weighting::Noise && cal.wide_step && !whole_noise).then(|| {
                     skydome::noise::estimate_for_calibration(
                         &c.frames,
                         &cal.response,
