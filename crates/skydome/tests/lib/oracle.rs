@@ -899,6 +899,10 @@ pub struct Candidate {
     /// `wpair=z`: observations below code `z` kept only where the same sample reads
     /// `z..=230` in another frame (the toe fitted from samples read in two frames).
     pub wide_pair: Option<f32>,
+    /// `wnoise=1`: on wide-step brackets the merge's noise model is fitted from code 24 up
+    /// (as where [`CalibrateOptions::step_periodic`] applied) without the curve's correction,
+    /// to tell the two parts of the eleventh round apart.
+    pub wide_noise: bool,
 }
 
 /// [`candidates`] with their wide-step rules ([`Candidate`]).
@@ -912,6 +916,7 @@ pub fn candidate_rules() -> Vec<Candidate> {
         wide_drop: None,
         wide_two_stage: None,
         wide_pair: None,
+        wide_noise: false,
     };
     let mut out = vec![plain("noise_fit", CalibrateOptions::noise_fit())];
     for cand in spec.split(';').filter(|c| !c.trim().is_empty()) {
@@ -946,6 +951,7 @@ pub fn candidate_rules() -> Vec<Candidate> {
                 "wtwo" => c.wide_two_stage = Some(f as f32),
                 "wpair" => c.wide_pair = Some(f as f32),
                 "periodic" => o.step_periodic = f != 0.0,
+                "wnoise" => c.wide_noise = f != 0.0,
                 other => panic!("unknown key {other}"),
             }
         }
@@ -1029,6 +1035,9 @@ pub fn calibrate_candidate(
     let mut cal = cal;
     if let Some(cv) = curves {
         cal.response = Response::from_curves(cv)?;
+    }
+    if wide && cand.wide_noise {
+        cal.wide_step = true;
     }
     Ok(cal)
 }
