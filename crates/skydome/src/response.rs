@@ -903,6 +903,8 @@ pub fn remove_step_periodic(curve: &[f64], step: f64, lo: usize) -> Vec<f64> {
     }
     let shift = curve[GAUGE] - phase_from[GAUGE];
     phase_from.iter_mut().for_each(|v| *v += shift);
+    // Exactly the gauge's value (the shift can leave a rounding error there).
+    phase_from[GAUGE] = curve[GAUGE];
     make_monotonic(&phase_from).0
 }
 

@@ -1039,6 +1039,25 @@ pub fn calibrate_candidate(
     if wide && cand.wide_noise {
         cal.wide_step = true;
     }
+    if cal.wide_step && std::env::var("SKYDOME_ORACLE_SHOW_PERIODIC").is_ok_and(|v| v == "1") {
+        // The correction's size per channel: RMS and largest change over codes 24–254 (ln).
+        let plain = calibrate(
+            frames,
+            circle,
+            &CalibrateOptions {
+                step_periodic: false,
+                ..o.clone()
+            },
+        )?;
+        for ch in 0..3 {
+            let (a, b) = (cal.response.curve(ch), plain.response.curve(ch));
+            let d: Vec<f64> = (24..=254).map(|z| a[z] - b[z]).collect();
+            let m = d.iter().sum::<f64>() / d.len() as f64;
+            let rms = (d.iter().map(|v| (v - m).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
+            let top = d.iter().map(|v| (v - m).abs()).fold(0.0, f64::max);
+            println!("    step-periodic correction ch {ch}: RMS {rms:.4} ln, largest {top:.4} ln");
+        }
+    }
     Ok(cal)
 }
 
