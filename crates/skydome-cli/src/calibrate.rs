@@ -68,6 +68,11 @@ pub struct CalibArgs {
     /// per cell, no rejection).
     #[arg(long, value_enum, default_value_t = Method::Auto)]
     pub method: Method,
+    /// Opt-in: on a bracket whose mean step is at least 2.5 EV, remove the curve's error that
+    /// repeats with the step (invisible to frames that far apart) and fit the merge's noise
+    /// model from code 24 up (see docs/accuracy.md, "Eleventh round"). Off by default.
+    #[arg(long)]
+    pub step_periodic: bool,
     /// Least-squares solver: `schur` (fast, default) or `svd` (the seed's dense SVD, slow).
     #[arg(long, default_value = "schur", value_parser = parse_solver)]
     pub solver: Solver,
@@ -134,7 +139,7 @@ impl CalibArgs {
             hat_margin: self.hat_margin.unwrap_or(base.hat_margin),
             ..base
         };
-        match self.method {
+        let mut o = match self.method {
             Method::Auto => {
                 let tuned = self.samples.is_some()
                     || self.stratify.is_some()
@@ -174,7 +179,9 @@ impl CalibArgs {
                 self.lambda.unwrap_or(response::SEED_LAMBDA),
                 self.solver,
             ),
-        }
+        };
+        o.step_periodic = self.step_periodic;
+        o
     }
 }
 

@@ -278,6 +278,45 @@ pub fn estimate(
     black: u8,
     mask: Option<&[bool]>,
 ) -> NoiseEstimate {
+    estimate_from_code(frames, response, black, mask, 0)
+}
+
+/// The lowest code (8-bit scale) from which the merge fits its noise model on a calibration
+/// whose step-periodic correction applied ([`crate::response::Calibration::wide_step`]): on
+/// brackets 3 EV apart the toe's codes, where the curve is least certain, decided a fit of
+/// 3–7× the true electrons (docs/accuracy.md, "Eighth round, second part" and "Eleventh
+/// round").
+pub const WIDE_STEP_NOISE_LO: u8 = 24;
+
+/// The merge's noise model for a calibrated curve: with `wide_step` (the calibration's
+/// step-periodic correction applied, [`crate::response::Calibration::wide_step`]) fitted from
+/// codes [`WIDE_STEP_NOISE_LO`] up ([`estimate_from_code`]), falling back to [`estimate`]
+/// when that fit does not measure the gain; else [`estimate`].
+pub fn estimate_for_calibration(
+    frames: &[Frame],
+    response: &Response,
+    black: u8,
+    mask: Option<&[bool]>,
+    wide_step: bool,
+) -> NoiseEstimate {
+    if wide_step {
+        let est = estimate_from_code(frames, response, black, mask, WIDE_STEP_NOISE_LO);
+        if !est.from_prior.gain && est.differences > 0 {
+            return est;
+        }
+    }
+    estimate(frames, response, black, mask)
+}
+
+/// [`estimate`] using only codes from `lo` up (8-bit scale; the codes below `black + 6` and
+/// above 245 are left out as there). `lo` 0 is [`estimate`].
+pub fn estimate_from_code(
+    frames: &[Frame],
+    response: &Response,
+    black: u8,
+    mask: Option<&[bool]>,
+    lo: u8,
+) -> NoiseEstimate {
     let fallback = |differences, bins| NoiseEstimate {
         model: NoiseModel::default(),
         differences,
@@ -298,7 +337,7 @@ pub fn estimate(
         return fallback(0, 0);
     }
     let stride = sample_stride(np);
-    let lo = (black as usize + 6).max(6);
+    let lo = (black as usize + 6).max(6).max(lo as usize);
     let hi = 245usize;
     if lo >= hi {
         return fallback(0, 0);
@@ -744,6 +783,29 @@ mod tests {
             assert!(whole.differences > 1000, "{whole:?}");
             assert_eq!(estimate(&kept, &response, 0, None), whole, "{w} × {h}");
         }
+    }
+
+    /// The fit from a code up reads fewer differences than the whole fit, is the whole fit
+    /// from code 0, and the calibration's choice ([`estimate_for_calibration`]) is the whole
+    /// fit unless the step-periodic correction applied.
+    #[test]
+    fn the_fit_from_a_code_up_leaves_the_toe_out() {
+        let b = crate::synth::generate(&crate::synth::SynthOptions {
+            width: 300,
+            height: 200,
+            ..Default::default()
+        })
+        .expect("synth");
+        let response = Response::linear();
+        let whole = estimate(&b.frames, &response, 0, None);
+        assert_eq!(estimate_from_code(&b.frames, &response, 0, None, 0), whole);
+        let upper = estimate_from_code(&b.frames, &response, 0, None, WIDE_STEP_NOISE_LO);
+        assert!(upper.differences > 0, "{upper:?}");
+        assert!(upper.differences < whole.differences, "{upper:?} {whole:?}");
+        let plain = estimate_for_calibration(&b.frames, &response, 0, None, false);
+        assert_eq!(plain, whole);
+        let wide = estimate_for_calibration(&b.frames, &response, 0, None, true);
+        assert!(wide == upper || wide == whole);
     }
 
     /// The shared fit from the channels' moments finds what a fit over the rows themselves

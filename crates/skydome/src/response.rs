@@ -308,6 +308,20 @@ pub struct CalibrateOptions {
     /// method but [`CalibrateOptions::joined`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub toe_from_grid: Option<[u8; 2]>,
+    /// The step-periodic correction (issue 27, docs/accuracy.md "Eleventh round"; opt-in,
+    /// `false` by default and in every named method): on a wide-step bracket ([`is_wide_step`],
+    /// a mean step of at least [`WIDE_STEP_EV`] EV) the fitted curve's component periodic in
+    /// `g` with the bracket's mean step as period — invisible to frames that far apart — is
+    /// removed ([`remove_step_periodic`], codes from [`STEP_PERIODIC_LO`] up), and the merge
+    /// fits its noise model from codes [`crate::noise::WIDE_STEP_NOISE_LO`] up
+    /// ([`Calibration::wide_step`]). Kept through [`CalibrateOptions::for_frames`]. Not
+    /// written when `false`, so profiles read and write as before.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub step_periodic: bool,
+}
+
+fn is_false(v: &bool) -> bool {
+    !*v
 }
 
 fn default_outlier_sigmas() -> f64 {
@@ -362,6 +376,7 @@ impl CalibrateOptions {
             outlier_sigmas: OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
+            step_periodic: false,
         }
     }
 
@@ -374,6 +389,7 @@ impl CalibrateOptions {
         let named = |mut c: Self| {
             c.sampling.seed = self.sampling.seed;
             c.solver = self.solver;
+            c.step_periodic = self.step_periodic;
             c
         };
         match self.covering_from {
@@ -438,6 +454,7 @@ impl CalibrateOptions {
             outlier_sigmas: OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
+            step_periodic: false,
         }
     }
 
@@ -466,6 +483,7 @@ impl CalibrateOptions {
             outlier_sigmas: COVERING_OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
+            step_periodic: false,
         }
     }
 
@@ -509,6 +527,7 @@ impl CalibrateOptions {
             outlier_sigmas: OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
+            step_periodic: false,
         }
     }
 
@@ -525,6 +544,7 @@ impl CalibrateOptions {
             outlier_sigmas: OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
+            step_periodic: false,
         }
     }
 }
@@ -557,6 +577,12 @@ pub struct Calibration {
     /// are then the grid fit's. Otherwise a joined calibration's samples, `ln E`, raw curves
     /// and monotonic fixes are its own fit's, and only `response` carries the grid's toe.
     pub grid_alone: bool,
+    /// True when the step-periodic correction was applied
+    /// ([`CalibrateOptions::step_periodic`] on a bracket whose mean step is at least
+    /// [`WIDE_STEP_EV`] EV): `response` is then the fitted curve less its step-periodic
+    /// component ([`remove_step_periodic`]), and the merge should fit its noise model from
+    /// codes [`crate::noise::WIDE_STEP_NOISE_LO`] up ([`crate::noise::estimate_from_code`]).
+    pub wide_step: bool,
 }
 
 impl Calibration {
@@ -768,7 +794,150 @@ fn fit_drawn(
             non_monotonic: r.rejected_non_monotonic,
         });
     }
-    calibrate_samples_with(samples, lt, opts)
+    let mut cal = calibrate_samples_with(samples, lt, opts)?;
+    if opts.step_periodic && is_wide_step(lt) {
+        let step = mean_step_ev(lt) * std::f64::consts::LN_2;
+        let curves = cal.response.curves();
+        let fixed = [0, 1, 2].map(|c| remove_step_periodic(&curves[c], step, STEP_PERIODIC_LO));
+        cal.response = Response::from_curves(fixed)?;
+        cal.wide_step = true;
+    }
+    Ok(cal)
+}
+
+/// The mean step from which a bracket counts as wide-step ([`is_wide_step`]), EV: brackets
+/// 3 EV apart are (docs/accuracy.md, "Eighth round, second part" and "Eleventh round").
+pub const WIDE_STEP_EV: f64 = 2.5;
+
+/// The code from which [`remove_step_periodic`] fits and removes the step-periodic component
+/// in calibration ([`CalibrateOptions::step_periodic`]); the toe below it is left to the fit.
+pub const STEP_PERIODIC_LO: usize = 24;
+
+/// The mean step of a bracket from its frames' `ln Δt` (sorted, shortest first), in EV:
+/// `(ln Δt_last − ln Δt_first) / (P − 1) / ln 2`, the mean of `log2(Δt_{j+1} / Δt_j)`; 0 for
+/// fewer than two frames.
+pub fn mean_step_ev(log_times: &[f64]) -> f64 {
+    match log_times {
+        [first, .., last] => (last - first) / (log_times.len() - 1) as f64 / std::f64::consts::LN_2,
+        _ => 0.0,
+    }
+}
+
+/// True when a bracket's mean step ([`mean_step_ev`], from its frames' `ln Δt`) is at least
+/// [`WIDE_STEP_EV`] EV (within 1e-9).
+pub fn is_wide_step(log_times: &[f64]) -> bool {
+    mean_step_ev(log_times) >= WIDE_STEP_EV - 1e-9
+}
+
+/// Reweighting passes of [`remove_step_periodic`]: each takes the harmonic's phase from the
+/// curve corrected by the previous pass.
+const STEP_PERIODIC_PASSES: usize = 3;
+
+/// `curve` (one channel, `g(z)` in natural log units, `z` = 0, 1, …) less its component
+/// periodic in `g` with period `step` (natural log units; the bracket's mean step
+/// `ln(Δt_{j+1} / Δt_j)`). Frames `step` apart constrain only `g(φ(z)) − g(z) = step`, where
+/// `φ` maps a code to the code the same radiance reads one frame later, so such a component
+/// costs the data nothing and the smoothness little (docs/accuracy.md, "Eighth round, second
+/// part").
+///
+/// On codes `lo..len − 1` (the last code, often clipped, left out of the fit) the curve is
+/// fitted by least squares as a smooth model — a cubic in `z` plus a multiple of `ln z` —
+/// plus one harmonic `a·sin(2π g/step) + b·cos(2π g/step)`; only the harmonic is subtracted,
+/// from `lo` up, and linearly faded to zero from code `lo` down to code 0 (so the curve stays
+/// continuous). The harmonic's phase is taken from the curve itself, then from the corrected
+/// curve ([`STEP_PERIODIC_PASSES`] passes). The result keeps `curve`'s value at [`GAUGE`] and
+/// is made non-decreasing (as the fit's curves are). A curve too short to fit (fewer than 16
+/// codes from `lo`) or a `step` that is not finite and positive gives `curve` unchanged, as
+/// does a singular fit.
+pub fn remove_step_periodic(curve: &[f64], step: f64, lo: usize) -> Vec<f64> {
+    let n = curve.len();
+    if !(step.is_finite() && step > 0.0)
+        || n < lo + 17
+        || n <= GAUGE
+        || curve.iter().any(|v| !v.is_finite())
+    {
+        return curve.to_vec();
+    }
+    let lo_fit = lo.max(1);
+    let hi_fit = n - 1;
+    let w = std::f64::consts::TAU / step;
+    let mut phase_from = curve.to_vec();
+    let mut harmonic = vec![0.0; n];
+    for _ in 0..STEP_PERIODIC_PASSES {
+        let basis = |z: usize, g: f64| -> [f64; 7] {
+            let t = (z as f64 - 128.0) / 128.0;
+            [
+                1.0,
+                t,
+                t * t,
+                t * t * t,
+                (z as f64 / 128.0).ln(),
+                (w * g).sin(),
+                (w * g).cos(),
+            ]
+        };
+        let mut ata = [[0.0f64; 7]; 7];
+        let mut aty = [0.0f64; 7];
+        for z in lo_fit..hi_fit {
+            let b = basis(z, phase_from[z]);
+            for r in 0..7 {
+                aty[r] += b[r] * curve[z];
+                for k in 0..7 {
+                    ata[r][k] += b[r] * b[k];
+                }
+            }
+        }
+        let Some(x) = solve_small(ata, aty) else {
+            return curve.to_vec();
+        };
+        let h = |g: f64| x[5] * (w * g).sin() + x[6] * (w * g).cos();
+        let at_lo = h(phase_from[lo_fit]);
+        for (z, v) in harmonic.iter_mut().enumerate() {
+            *v = if z >= lo_fit {
+                h(phase_from[z])
+            } else {
+                at_lo * z as f64 / lo_fit as f64
+            };
+        }
+        phase_from = curve.iter().zip(&harmonic).map(|(g, h)| g - h).collect();
+    }
+    let shift = curve[GAUGE] - phase_from[GAUGE];
+    phase_from.iter_mut().for_each(|v| *v += shift);
+    // Exactly the gauge's value (the shift can leave a rounding error there).
+    phase_from[GAUGE] = curve[GAUGE];
+    make_monotonic(&phase_from).0
+}
+
+/// Solves the symmetric system `a · x = b` (7 unknowns) by Gaussian elimination with partial
+/// pivoting; `None` when it is singular (a pivot below 1e-12 of the largest diagonal entry).
+fn solve_small(mut a: [[f64; 7]; 7], mut b: [f64; 7]) -> Option<[f64; 7]> {
+    let scale = (0..7).map(|i| a[i][i].abs()).fold(0.0, f64::max);
+    if !(scale.is_finite() && scale > 0.0) {
+        return None;
+    }
+    for col in 0..7 {
+        let piv = (col..7).max_by(|&i, &k| a[i][col].abs().total_cmp(&a[k][col].abs()))?;
+        if a[piv][col].abs() <= 1e-12 * scale {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        let (pivot, below) = a.split_at_mut(col + 1);
+        let prow = &pivot[col];
+        for (k, row) in below.iter_mut().enumerate() {
+            let f = row[col] / prow[col];
+            for (v, p) in row.iter_mut().zip(prow).skip(col) {
+                *v -= f * p;
+            }
+            b[col + 1 + k] -= f * b[col];
+        }
+    }
+    let mut x = [0.0; 7];
+    for r in (0..7).rev() {
+        let s: f64 = (r + 1..7).map(|k| a[r][k] * x[k]).sum();
+        x[r] = (b[r] - s) / a[r][r];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 fn check_lambda(lambda: f64) -> Result<(), ResponseError> {
@@ -889,6 +1058,7 @@ fn solve_all(
         log_times: log_times.to_vec(),
         lambda,
         grid_alone: false,
+        wide_step: false,
     })
 }
 
@@ -1660,6 +1830,105 @@ mod tests {
         let (m, n) = make_monotonic(&g);
         assert_eq!(n, 2);
         assert!(m.windows(2).all(|w| w[1] >= w[0]));
+    }
+
+    /// An sRGB-like curve (not in the smooth model's span), gauged at code 128.
+    fn smooth_curve() -> Vec<f64> {
+        let lin = |z: usize| {
+            let v = (z as f64 + 0.5) / 255.5;
+            if v <= 0.04045 {
+                v / 12.92
+            } else {
+                ((v + 0.055) / 1.055).powf(2.4)
+            }
+        };
+        let g0 = lin(GAUGE).ln();
+        (0..LEVELS).map(|z| lin(z).ln() - g0).collect()
+    }
+
+    /// RMS over codes 24..=254 of `a − b`, its mean removed (natural log units).
+    fn rms_from_24(a: &[f64], b: &[f64]) -> f64 {
+        let d: Vec<f64> = (24..=254).map(|z| a[z] - b[z]).collect();
+        let m = d.iter().sum::<f64>() / d.len() as f64;
+        (d.iter().map(|v| (v - m).powi(2)).sum::<f64>() / d.len() as f64).sqrt()
+    }
+
+    #[test]
+    fn step_periodic_correction_removes_an_injected_periodic_error() {
+        let truth = smooth_curve();
+        let step = 3.0 * std::f64::consts::LN_2;
+        let w = std::f64::consts::TAU / step;
+        let bent: Vec<f64> = truth
+            .iter()
+            .map(|&g| g + 0.1 * (w * g + 0.7).sin())
+            .collect();
+        let before = rms_from_24(&bent, &truth);
+        assert!(before > 0.06, "{before}");
+        let fixed = remove_step_periodic(&bent, step, STEP_PERIODIC_LO);
+        let after = rms_from_24(&fixed, &truth);
+        println!("injected 0.1-ln sinusoid: RMS {before:.4} -> {after:.4} ln (codes 24-254)");
+        assert!(after < 0.02, "RMS {before:.4} -> {after:.4} ln");
+        assert_eq!(fixed[GAUGE], bent[GAUGE]);
+        assert!(fixed.windows(2).all(|p| p[1] >= p[0]));
+        // Continuous at the toe: no step larger than the curve's own there.
+        for z in 1..=STEP_PERIODIC_LO {
+            let (d, t) = (fixed[z] - fixed[z - 1], bent[z] - bent[z - 1]);
+            assert!((d - t).abs() < 0.02, "code {z}: slope {d} against {t}");
+        }
+    }
+
+    #[test]
+    fn step_periodic_correction_leaves_a_smooth_curve_alone() {
+        let truth = smooth_curve();
+        let fixed = remove_step_periodic(&truth, 3.0 * std::f64::consts::LN_2, STEP_PERIODIC_LO);
+        let worst = (0..LEVELS)
+            .map(|z| (fixed[z] - truth[z]).abs())
+            .fold(0.0, f64::max);
+        println!("no periodic error: worst change {worst:.5} ln");
+        assert!(worst < 0.01, "worst change {worst} ln");
+        // Nothing to fit: unchanged.
+        assert_eq!(remove_step_periodic(&truth, f64::NAN, 24), truth);
+        assert_eq!(remove_step_periodic(&truth[..30], 2.0, 24), truth[..30]);
+    }
+
+    #[test]
+    fn wide_step_is_the_mean_step_from_2_5_ev() {
+        let l2 = std::f64::consts::LN_2;
+        let three: Vec<f64> = (0..8).map(|j| j as f64 * 3.0 * l2).collect();
+        assert!((mean_step_ev(&three) - 3.0).abs() < 1e-12);
+        assert!(is_wide_step(&three));
+        let two: Vec<f64> = (0..5).map(|j| j as f64 * 2.0 * l2).collect();
+        assert!(!is_wide_step(&two));
+        assert!(is_wide_step(&[0.0, 2.5 * l2]));
+        assert_eq!(mean_step_ev(&[0.0]), 0.0);
+        assert_eq!(mean_step_ev(&[]), 0.0);
+    }
+
+    #[test]
+    fn step_periodic_is_off_by_default_and_not_written_when_off() {
+        for o in [
+            CalibrateOptions::default(),
+            CalibrateOptions::robust(),
+            CalibrateOptions::covering(),
+            CalibrateOptions::joined(),
+            CalibrateOptions::noise_fit(),
+            CalibrateOptions::colour_hdri(),
+        ] {
+            assert!(!o.step_periodic);
+            assert!(!o.for_frames(8).step_periodic);
+            let json = serde_json::to_string(&o).unwrap();
+            assert!(!json.contains("step_periodic"), "{json}");
+            let back: CalibrateOptions = serde_json::from_str(&json).unwrap();
+            assert_eq!(back, o);
+        }
+        let on = CalibrateOptions {
+            step_periodic: true,
+            ..CalibrateOptions::default()
+        };
+        assert!(on.for_frames(8).step_periodic && on.for_frames(3).step_periodic);
+        let json = serde_json::to_string(&on).unwrap();
+        assert!(json.contains("\"step_periodic\":true"), "{json}");
+        assert_eq!(serde_json::from_str::<CalibrateOptions>(&json).unwrap(), on);
     }
 
     #[test]

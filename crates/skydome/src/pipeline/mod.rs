@@ -194,6 +194,7 @@ pub fn run(
             options,
             &mut br,
             &calibrated.response,
+            calibrated.wide_step,
             lens_circle,
             window,
             prepared,
@@ -351,6 +352,10 @@ struct Calibrated {
     warnings: Vec<String>,
     /// The listed exposures against those measured from the photos.
     exposures: Option<ExposureReport>,
+    /// The calibration's step-periodic correction applied
+    /// ([`response::Calibration::wide_step`]): the merge fits its noise model from codes
+    /// [`noise::WIDE_STEP_NOISE_LO`] up.
+    wide_step: bool,
 }
 
 /// A RAW bracket's response: linear by construction, nothing to fit. Its listed exposures are
@@ -370,6 +375,7 @@ fn linear_response(exposures: ExposureSource) -> Calibrated {
         from: "linear (RAW)",
         warnings,
         exposures: None,
+        wide_step: false,
     }
 }
 
@@ -403,6 +409,7 @@ fn response_stage(
             from: "profile",
             warnings: Vec::new(),
             exposures: None,
+            wide_step: false,
         },
         (ResponseSource::Calibrate(o), ExposureSource::Listed) => {
             let name = o.for_frames(br.frames.len()).method_name();
@@ -419,6 +426,7 @@ fn response_stage(
                 from: "profile",
                 warnings: Vec::new(),
                 exposures: None,
+                wide_step: false,
             };
             measured_into(&mut c, br, &m, 0);
             c
@@ -460,6 +468,7 @@ fn calibrated_on(cal: response::Calibration, br: &Bracket, method: String) -> Ca
     ];
     let mut profile = CameraProfile::from_calibration(&cal);
     describe_camera(&mut profile, br);
+    let wide_step = cal.wide_step;
     Calibrated {
         response: cal.response,
         profile: Some(profile),
@@ -468,6 +477,7 @@ fn calibrated_on(cal: response::Calibration, br: &Bracket, method: String) -> Ca
         method: Some(method),
         from: "calibrated on this bracket",
         exposures: None,
+        wide_step,
     }
 }
 
@@ -591,11 +601,15 @@ fn raw_merge_stage(
 /// The merge stage: linear radiance from the frames, whose pixels are given back as the merge
 /// goes (nothing after it reads them, so the frames and the radiance are never both whole in
 /// memory). Black pixels and disagreement are judged inside the lens circle when there is one
-/// (the housing outside is black in every frame by design).
+/// (the housing outside is black in every frame by design). `wide_step`: the calibration's
+/// step-periodic correction applied, so a fitted noise model is fitted from code 24 up
+/// ([`noise::estimate_for_calibration`]).
+#[allow(clippy::too_many_arguments)]
 fn merge_stage(
     options: &Options,
     br: &mut Bracket,
     response: &Response,
+    wide_step: bool,
     lens_circle: Option<Circle>,
     window: Option<Window>,
     prepared: Option<stream::Prepared>,
@@ -612,17 +626,19 @@ fn merge_stage(
     // pixels of them that the streamed intake kept for it, which give the same fit): a merge of
     // the dome's window alone then weighs every pixel as the whole photo's merge would.
     let fitted_estimate = match (profile_estimate, options.weighting, &prepared) {
-        (None, merge::Weighting::Noise, Some(p)) => Some(noise::estimate(
+        (None, merge::Weighting::Noise, Some(p)) => Some(noise::estimate_for_calibration(
             &p.noise_samples,
             response,
             options.black_level,
             None,
+            wide_step,
         )),
-        (None, merge::Weighting::Noise, None) => Some(noise::estimate(
+        (None, merge::Weighting::Noise, None) => Some(noise::estimate_for_calibration(
             &br.frames,
             response,
             options.black_level,
             None,
+            wide_step,
         )),
         _ => None,
     };
@@ -631,7 +647,10 @@ fn merge_stage(
     // The standard error needs a noise model; the frames are given back during the merge.
     let error_noise = options.products.confidence.then(|| match known_noise {
         Some(n) => n,
-        None => noise::estimate(&br.frames, response, options.black_level, None).model,
+        None => {
+            let black = options.black_level;
+            noise::estimate_for_calibration(&br.frames, response, black, None, wide_step).model
+        }
     });
     let log_exposures: Vec<f64> = br
         .frames
@@ -1387,6 +1406,7 @@ mod tests {
                 &crop,
                 &mut br,
                 &response,
+                false,
                 Some(lens.circle),
                 window,
                 None,

@@ -311,6 +311,7 @@ pub(super) fn intake(
                     from: "profile",
                     warnings: Vec::new(),
                     exposures: None,
+                    wide_step: false,
                 },
                 Err(_) => return Ok(None),
             },

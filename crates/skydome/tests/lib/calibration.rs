@@ -654,3 +654,48 @@ fn every_calibration_method_has_its_command_line_name() {
         );
     }
 }
+
+/// The step-periodic correction (docs/accuracy.md, "Eleventh round") is opt-in: the default
+/// calibration leaves it off and gives what it gave before; switched on, it applies only to
+/// wide-step brackets (mean step ≥ 2.5 EV), where it changes the curve and says so, and a
+/// 2-EV bracket calibrates to the same bytes with it or without.
+#[test]
+fn the_step_periodic_correction_is_opt_in_and_only_for_wide_steps() {
+    let bracket = |evs: Vec<f64>| {
+        generate(&SynthOptions {
+            width: 192,
+            height: 192,
+            evs,
+            ..SynthOptions::default()
+        })
+        .unwrap()
+    };
+    let on = CalibrateOptions {
+        step_periodic: true,
+        ..CalibrateOptions::default()
+    };
+    assert!(!CalibrateOptions::default().step_periodic);
+    // Five frames 3 EV apart: wide-step.
+    let wide = bracket(vec![-6.0, -3.0, 0.0, 3.0, 6.0]);
+    let plain = calibrate(&wide.frames, wide.circle, &CalibrateOptions::default()).unwrap();
+    assert!(!plain.wide_step);
+    let fixed = calibrate(&wide.frames, wide.circle, &on).unwrap();
+    assert!(fixed.wide_step);
+    assert_eq!(fixed.samples, plain.samples);
+    assert_eq!(fixed.raw_curves, plain.raw_curves);
+    assert_ne!(fixed.response, plain.response);
+    for c in 0..3 {
+        let (a, b) = (fixed.response.curve(c), plain.response.curve(c));
+        assert_eq!(a[128], b[128]);
+        assert!(a.windows(2).all(|w| w[1] >= w[0]));
+        // A correction, not a new curve: within a few tenths of a stop.
+        let worst = (0..256).map(|z| (a[z] - b[z]).abs()).fold(0.0, f64::max);
+        assert!(worst < 0.5, "channel {c}: {worst}");
+    }
+    // Three frames 2 EV apart: not wide-step, so the same calibration.
+    let narrow = bracket(vec![-2.0, 0.0, 2.0]);
+    let a = calibrate(&narrow.frames, narrow.circle, &CalibrateOptions::default()).unwrap();
+    let b = calibrate(&narrow.frames, narrow.circle, &on).unwrap();
+    assert!(!a.wide_step && !b.wide_step);
+    assert_eq!(a.response, b.response);
+}

@@ -866,7 +866,7 @@ pub fn curve_error(case: &Case, g: &[Vec<f64>; 3]) -> [f64; 4] {
 /// The calibrations tried while choosing the default's (see [`calibration_candidates`]):
 /// `SKYDOME_ORACLE_CANDIDATES`, `;`-separated, each a `,`-separated list of `key=value` on top
 /// of [`CalibrateOptions::noise_fit`] (keys `samples`, `cover`, `stratify`, `lo`, `hi`,
-/// `lambda`, `margin`, `bands`, `fit`, `patch`, `cut`, `join` (`a-b`: the grid
+/// `lambda`, `margin`, `bands`, `fit`, `patch`, `cut`, `periodic` (`1`: [`CalibrateOptions::step_periodic`]), `join` (`a-b`: the grid
 /// calibration's toe, [`CalibrateOptions::toe_from_grid`]); `covering=1` starts again from
 /// [`CalibrateOptions::covering`], so put it first); `noise_fit` alone without the variable.
 /// The keys of [`Candidate`]'s wide-step rules are accepted and dropped here.
@@ -899,6 +899,10 @@ pub struct Candidate {
     /// `wpair=z`: observations below code `z` kept only where the same sample reads
     /// `z..=230` in another frame (the toe fitted from samples read in two frames).
     pub wide_pair: Option<f32>,
+    /// `wnoise=1`: on wide-step brackets the merge's noise model is fitted from code 24 up
+    /// (as where [`CalibrateOptions::step_periodic`] applied) without the curve's correction,
+    /// to tell the two parts of the eleventh round apart.
+    pub wide_noise: bool,
 }
 
 /// [`candidates`] with their wide-step rules ([`Candidate`]).
@@ -912,6 +916,7 @@ pub fn candidate_rules() -> Vec<Candidate> {
         wide_drop: None,
         wide_two_stage: None,
         wide_pair: None,
+        wide_noise: false,
     };
     let mut out = vec![plain("noise_fit", CalibrateOptions::noise_fit())];
     for cand in spec.split(';').filter(|c| !c.trim().is_empty()) {
@@ -945,6 +950,8 @@ pub fn candidate_rules() -> Vec<Candidate> {
                 "wdrop" => c.wide_drop = Some(f as f32),
                 "wtwo" => c.wide_two_stage = Some(f as f32),
                 "wpair" => c.wide_pair = Some(f as f32),
+                "periodic" => o.step_periodic = f != 0.0,
+                "wnoise" => c.wide_noise = f != 0.0,
                 other => panic!("unknown key {other}"),
             }
         }
@@ -955,12 +962,8 @@ pub fn candidate_rules() -> Vec<Candidate> {
 
 /// The mean step of a bracket, EV: `(ln Δt_last − ln Δt_first) / (P − 1) / ln 2`.
 pub fn mean_step_ev(frames: &[Frame]) -> f64 {
-    let n = frames.len();
-    if n < 2 {
-        return 0.0;
-    }
-    let lt = |f: &Frame| f.exposure.relative().ln();
-    (lt(&frames[n - 1]) - lt(&frames[0])) / (n - 1) as f64 / std::f64::consts::LN_2
+    let lt: Vec<f64> = frames.iter().map(|f| f.exposure.relative().ln()).collect();
+    skydome::response::mean_step_ev(&lt)
 }
 
 /// Calibrates `frames` with `cand` (its wide-step rules applied where the bracket's mean step
@@ -1032,6 +1035,28 @@ pub fn calibrate_candidate(
     let mut cal = cal;
     if let Some(cv) = curves {
         cal.response = Response::from_curves(cv)?;
+    }
+    if wide && cand.wide_noise {
+        cal.wide_step = true;
+    }
+    if cal.wide_step && std::env::var("SKYDOME_ORACLE_SHOW_PERIODIC").is_ok_and(|v| v == "1") {
+        // The correction's size per channel: RMS and largest change over codes 24–254 (ln).
+        let plain = calibrate(
+            frames,
+            circle,
+            &CalibrateOptions {
+                step_periodic: false,
+                ..o.clone()
+            },
+        )?;
+        for ch in 0..3 {
+            let (a, b) = (cal.response.curve(ch), plain.response.curve(ch));
+            let d: Vec<f64> = (24..=254).map(|z| a[z] - b[z]).collect();
+            let m = d.iter().sum::<f64>() / d.len() as f64;
+            let rms = (d.iter().map(|v| (v - m).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
+            let top = d.iter().map(|v| (v - m).abs()).fold(0.0, f64::max);
+            println!("    step-periodic correction ch {ch}: RMS {rms:.4} ln, largest {top:.4} ln");
+        }
     }
     Ok(cal)
 }
@@ -1110,8 +1135,24 @@ fn calibration_candidates() {
             let floor = rms3(eo);
             let orc_sun = median_offset(&orc, &c.truth, &sun, eo);
             let eval = |cal: &skydome::response::Calibration, w: Weighting| {
+                // The merge's noise model as the pipeline fits it for this calibration
+                // (from code 24 up where the step-periodic correction applied;
+                // `SKYDOME_ORACLE_WIDE_NOISE=0` keeps the whole fit, to tell the two apart).
+                let whole_noise =
+                    std::env::var("SKYDOME_ORACLE_WIDE_NOISE").is_ok_and(|v| v == "0");
+                let noise = (w == Weighting::Noise && cal.wide_step && !whole_noise).then(|| {
+                    skydome::noise::estimate_for_calibration(
+                        &c.frames,
+                        &cal.response,
+                        0,
+                        None,
+                        true,
+                    )
+                    .model
+                });
                 let opts = MergeOptions {
                     weighting: w,
+                    noise,
                     ..MergeOptions::default()
                 };
                 let img = merge(&c.frames, &cal.response, &opts).unwrap().radiance;
