@@ -908,35 +908,20 @@ pub fn remove_step_periodic(curve: &[f64], step: f64, lo: usize) -> Vec<f64> {
     make_monotonic(&phase_from).0
 }
 
-/// Solves the symmetric system `a · x = b` (7 unknowns) by Gaussian elimination with partial
+/// Solves the symmetric system `a · x = b` (7 unknowns) by nalgebra's LU with partial
 /// pivoting; `None` when it is singular (a pivot below 1e-12 of the largest diagonal entry).
-fn solve_small(mut a: [[f64; 7]; 7], mut b: [f64; 7]) -> Option<[f64; 7]> {
-    let scale = (0..7).map(|i| a[i][i].abs()).fold(0.0, f64::max);
+fn solve_small(a: [[f64; 7]; 7], b: [f64; 7]) -> Option<[f64; 7]> {
+    let m = nalgebra::SMatrix::<f64, 7, 7>::from_fn(|r, k| a[r][k]);
+    let scale = m.diagonal().amax();
     if !(scale.is_finite() && scale > 0.0) {
         return None;
     }
-    for col in 0..7 {
-        let piv = (col..7).max_by(|&i, &k| a[i][col].abs().total_cmp(&a[k][col].abs()))?;
-        if a[piv][col].abs() <= 1e-12 * scale {
-            return None;
-        }
-        a.swap(col, piv);
-        b.swap(col, piv);
-        let (pivot, below) = a.split_at_mut(col + 1);
-        let prow = &pivot[col];
-        for (k, row) in below.iter_mut().enumerate() {
-            let f = row[col] / prow[col];
-            for (v, p) in row.iter_mut().zip(prow).skip(col) {
-                *v -= f * p;
-            }
-            b[col + 1 + k] -= f * b[col];
-        }
+    let lu = m.lu();
+    if lu.u().diagonal().iter().any(|p| p.abs() <= 1e-12 * scale) {
+        return None;
     }
-    let mut x = [0.0; 7];
-    for r in (0..7).rev() {
-        let s: f64 = (r + 1..7).map(|k| a[r][k] * x[k]).sum();
-        x[r] = (b[r] - s) / a[r][r];
-    }
+    let x = lu.solve(&nalgebra::SVector::<f64, 7>::from(b))?;
+    let x: [f64; 7] = x.into();
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
