@@ -68,11 +68,16 @@ pub struct CalibArgs {
     /// per cell, no rejection).
     #[arg(long, value_enum, default_value_t = Method::Auto)]
     pub method: Method,
-    /// Opt-in: on a bracket whose mean step is at least 2.5 EV, remove the curve's error that
-    /// repeats with the step (invisible to frames that far apart) and fit the merge's noise
-    /// model from code 24 up (see docs/accuracy.md, "Eleventh round"). Off by default.
-    #[arg(long)]
+    /// On a bracket whose mean step is at least 2.5 EV, remove the curve's error that repeats
+    /// with the step (invisible to frames that far apart) and fit the merge's noise model from
+    /// code 24 up (see docs/accuracy.md, "Twelfth round"). The covering calibration does it by
+    /// default (so `auto` from 5 frames); this asks for it with any method.
+    #[arg(long, conflicts_with = "no_step_periodic")]
     pub step_periodic: bool,
+    /// Never apply the step-periodic correction (the calibration before it became the
+    /// covering calibration's default).
+    #[arg(long)]
+    pub no_step_periodic: bool,
     /// Least-squares solver: `schur` (fast, default) or `svd` (the seed's dense SVD, slow).
     #[arg(long, default_value = "schur", value_parser = parse_solver)]
     pub solver: Solver,
@@ -180,7 +185,9 @@ impl CalibArgs {
                 self.solver,
             ),
         };
-        o.step_periodic = self.step_periodic;
+        if self.step_periodic || self.no_step_periodic {
+            o.step_periodic = Some(self.step_periodic);
+        }
         o
     }
 }
@@ -271,11 +278,15 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     };
     let spin = io::spinner(quiet, "calibrating");
     let calibration;
+    // The step-periodic correction applied (`--step-periodic` on a wide-step bracket): the
+    // stored noise model is then fitted from code 24 up, as the merge after it would fit it.
+    let mut wide_step = false;
     let mut profile = if a.linear {
         CameraProfile::linear()
     } else {
         calibration =
             response::calibrate(&br.frames, a.calib.circle, &opts).context("calibration failed")?;
+        wide_step = calibration.wide_step;
         report.sampling = Some(calibration.report());
         report.calibration = Some(opts.for_frames(br.frames.len()).method_name());
         if let Some(w) = calibration.report().relaxed_warning() {
@@ -325,7 +336,7 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     // 0: a merge with `--black-level` still uses it). Stored with what came from the prior.
     report.noise = Some(
         profile
-            .estimate_noise(&br.frames, 0)
+            .estimate_noise(&br.frames, 0, wide_step)
             .context("noise model")?,
     );
     spin.finish_and_clear();

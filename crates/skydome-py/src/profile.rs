@@ -300,8 +300,8 @@ pub fn calibrate(
         if bridge.stage("calibrating", 0.0).is_break() {
             return Err(Failure::Pipeline(pipeline::PipelineError::Cancelled));
         }
-        let (mut profile, warnings) = if linear {
-            (skydome::camera::CameraProfile::linear(), Vec::new())
+        let (mut profile, warnings, wide_step) = if linear {
+            (skydome::camera::CameraProfile::linear(), Vec::new(), false)
         } else {
             let cal = response::calibrate(&br.frames, circle, &opts)
                 .map_err(|e| Failure::Message(format!("calibration failed: {e}")))?;
@@ -317,12 +317,13 @@ pub fn calibrate(
             (
                 skydome::camera::CameraProfile::from_calibration(&cal),
                 warnings,
+                cal.wide_step,
             )
         };
         // The noise model merges with this profile use instead of fitting their own, as
         // `skydome calibrate` stores it.
         profile
-            .estimate_noise(&br.frames, 0)
+            .estimate_noise(&br.frames, 0, wide_step)
             .map_err(|e| Failure::Message(format!("noise model: {e}")))?;
         pipeline::describe_camera(&mut profile, &br);
         let mut all = br.warnings.clone();

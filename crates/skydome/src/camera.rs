@@ -247,13 +247,19 @@ impl CameraProfile {
 
     /// Fits the noise model to `frames` (sorted shortest first) with this profile's response
     /// and a black level of `black` (8-bit codes), and stores it ([`set_noise`](Self::set_noise)),
-    /// as `skydome calibrate` does. Returns the fit.
+    /// as `skydome calibrate` does. Returns the fit. `wide_step`: the calibration's
+    /// step-periodic correction applied ([`crate::response::Calibration::wide_step`]), so the
+    /// model is fitted as a merge right after that calibration fits it
+    /// ([`noise::estimate_for_calibration`]: from code [`noise::WIDE_STEP_NOISE_LO`] up) and a
+    /// later merge with this profile weighs its pixels the same way.
     pub fn estimate_noise(
         &mut self,
         frames: &[Frame],
         black: u8,
+        wide_step: bool,
     ) -> Result<NoiseEstimate, ResponseError> {
-        let est = noise::estimate(frames, &self.response()?, black, None);
+        let est =
+            noise::estimate_for_calibration(frames, &self.response()?, black, None, wide_step);
         self.set_noise(&est);
         Ok(est)
     }

@@ -308,20 +308,22 @@ pub struct CalibrateOptions {
     /// method but [`CalibrateOptions::joined`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub toe_from_grid: Option<[u8; 2]>,
-    /// The step-periodic correction (issue 27, docs/accuracy.md "Eleventh round"; opt-in,
-    /// `false` by default and in every named method): on a wide-step bracket ([`is_wide_step`],
-    /// a mean step of at least [`WIDE_STEP_EV`] EV) the fitted curve's component periodic in
-    /// `g` with the bracket's mean step as period — invisible to frames that far apart — is
-    /// removed ([`remove_step_periodic`], codes from [`STEP_PERIODIC_LO`] up), and the merge
-    /// fits its noise model from codes [`crate::noise::WIDE_STEP_NOISE_LO`] up
-    /// ([`Calibration::wide_step`]). Kept through [`CalibrateOptions::for_frames`]. Not
-    /// written when `false`, so profiles read and write as before.
-    #[serde(default, skip_serializing_if = "is_false")]
-    pub step_periodic: bool,
-}
-
-fn is_false(v: &bool) -> bool {
-    !*v
+    /// The step-periodic correction (issue 27, docs/accuracy.md "Eleventh" and "Twelfth
+    /// round"): on a wide-step bracket ([`is_wide_step`], a mean step of at least
+    /// [`WIDE_STEP_EV`] EV) the fitted curve's component periodic in `g` with the bracket's mean
+    /// step as period — invisible to frames that far apart — is removed
+    /// ([`remove_step_periodic`], fitted on codes [`STEP_PERIODIC_LO`] up to
+    /// [`STEP_PERIODIC_HI`]), and the merge fits its noise model from codes
+    /// [`crate::noise::WIDE_STEP_NOISE_LO`] up ([`Calibration::wide_step`]).
+    ///
+    /// `None` is the method's own rule: on in [`CalibrateOptions::covering`] (`Some(true)`, so
+    /// the default calibration applies it from [`COVERING_FROM_FRAMES`] frames), off in every
+    /// other method (the joined calibration of 2–4 frames lost dim grounds with it).
+    /// `Some(v)` is asked for and wins over the method's rule, through
+    /// [`CalibrateOptions::for_frames`] too. Not written when `None`, so profiles and options
+    /// written before it read and write as before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step_periodic: Option<bool>,
 }
 
 fn default_outlier_sigmas() -> f64 {
@@ -376,7 +378,7 @@ impl CalibrateOptions {
             outlier_sigmas: OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
-            step_periodic: false,
+            step_periodic: None,
         }
     }
 
@@ -389,7 +391,9 @@ impl CalibrateOptions {
         let named = |mut c: Self| {
             c.sampling.seed = self.sampling.seed;
             c.solver = self.solver;
-            c.step_periodic = self.step_periodic;
+            if self.step_periodic.is_some() {
+                c.step_periodic = self.step_periodic;
+            }
             c
         };
         match self.covering_from {
@@ -441,6 +445,12 @@ impl CalibrateOptions {
         }
     }
 
+    /// Whether [`CalibrateOptions::step_periodic`] applies (on a wide-step bracket): as asked,
+    /// else off (the methods that apply it say `Some(true)`).
+    pub fn step_periodic_applies(&self) -> bool {
+        self.step_periodic == Some(true)
+    }
+
     /// The calibration that uses the data (issue 27): 2000 samples stratified over the middle
     /// frame's codes ([`SampleOptions::stratified`]), the noise-weighted fit ([`Fit::Noise`]),
     /// λ = [`NOISE_FIT_LAMBDA`]. `skydome calibrate --method noise`.
@@ -454,14 +464,16 @@ impl CalibrateOptions {
             outlier_sigmas: OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
-            step_periodic: false,
+            step_periodic: None,
         }
     }
 
     /// The covering calibration (issue 27): 2000 samples spread over 16 code bands of every
     /// frame and channel ([`SampleOptions::covering`]; codes from 1 count as measured, so the
     /// darkest codes of the longest frame are sampled too), the noise-weighted fit
-    /// ([`Fit::Noise`]), λ = [`COVERING_LAMBDA`]. `skydome calibrate --method covering`.
+    /// ([`Fit::Noise`]), λ = [`COVERING_LAMBDA`], and on wide-step brackets the step-periodic
+    /// correction ([`CalibrateOptions::step_periodic`] `Some(true)`; docs/accuracy.md "Twelfth
+    /// round"). `skydome calibrate --method covering`.
     ///
     /// Chosen on the oracle's tuning brackets (seeds 1–3 and 11–22, see
     /// `tests/lib/oracle.rs`): mean sky ratio to the oracle with the noise merge, 2–9 frames,
@@ -483,7 +495,7 @@ impl CalibrateOptions {
             outlier_sigmas: COVERING_OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
-            step_periodic: false,
+            step_periodic: Some(true),
         }
     }
 
@@ -496,6 +508,7 @@ impl CalibrateOptions {
     pub fn joined() -> Self {
         Self {
             toe_from_grid: Some(JOINED_TOE),
+            step_periodic: None,
             ..Self::covering()
         }
     }
@@ -527,7 +540,7 @@ impl CalibrateOptions {
             outlier_sigmas: OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
-            step_periodic: false,
+            step_periodic: None,
         }
     }
 
@@ -544,7 +557,7 @@ impl CalibrateOptions {
             outlier_sigmas: OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
-            step_periodic: false,
+            step_periodic: None,
         }
     }
 }
@@ -795,7 +808,7 @@ fn fit_drawn(
         });
     }
     let mut cal = calibrate_samples_with(samples, lt, opts)?;
-    if opts.step_periodic && is_wide_step(lt) {
+    if opts.step_periodic_applies() && is_wide_step(lt) {
         let step = mean_step_ev(lt) * std::f64::consts::LN_2;
         let curves = cal.response.curves();
         let fixed = [0, 1, 2].map(|c| remove_step_periodic(&curves[c], step, STEP_PERIODIC_LO));
@@ -829,6 +842,13 @@ pub fn is_wide_step(log_times: &[f64]) -> bool {
     mean_step_ev(log_times) >= WIDE_STEP_EV - 1e-9
 }
 
+/// The code below which [`remove_step_periodic`] fits the step-periodic component: the top
+/// band, codes 240–254 (and the clipped 255), is left out of the fit, though the harmonic is
+/// removed there too. The curve is least certain next to clipping (on 9 × 3 EV brackets its
+/// error there reaches 0.8 stop, docs/accuracy.md "Twelfth round"), and a harmonic fitted
+/// through that error took it into the middle codes the sky reads.
+pub const STEP_PERIODIC_HI: usize = 240;
+
 /// Reweighting passes of [`remove_step_periodic`]: each takes the harmonic's phase from the
 /// curve corrected by the previous pass.
 const STEP_PERIODIC_PASSES: usize = 3;
@@ -840,27 +860,43 @@ const STEP_PERIODIC_PASSES: usize = 3;
 /// costs the data nothing and the smoothness little (docs/accuracy.md, "Eighth round, second
 /// part").
 ///
-/// On codes `lo..len − 1` (the last code, often clipped, left out of the fit) the curve is
-/// fitted by least squares as a smooth model — a cubic in `z` plus a multiple of `ln z` —
+/// On codes `lo..min(STEP_PERIODIC_HI, len − 1)` (the top band [`STEP_PERIODIC_HI`]–254 and
+/// the last code, often clipped, left out of the fit) the curve is fitted by least squares as a smooth model — a cubic in `z` plus a multiple of `ln z` —
 /// plus one harmonic `a·sin(2π g/step) + b·cos(2π g/step)`; only the harmonic is subtracted,
 /// from `lo` up, and linearly faded to zero from code `lo` down to code 0 (so the curve stays
 /// continuous). The harmonic's phase is taken from the curve itself, then from the corrected
 /// curve ([`STEP_PERIODIC_PASSES`] passes). The result keeps `curve`'s value at [`GAUGE`] and
 /// is made non-decreasing (as the fit's curves are). A curve too short to fit (fewer than 16
-/// codes from `lo`) or a `step` that is not finite and positive gives `curve` unchanged, as
+/// codes to fit from `lo`) or a `step` that is not finite and positive gives `curve` unchanged, as
 /// does a singular fit.
 pub fn remove_step_periodic(curve: &[f64], step: f64, lo: usize) -> Vec<f64> {
+    let Some(harmonic) = periodic_harmonic(curve, step, lo) else {
+        return curve.to_vec();
+    };
+    let mut fixed: Vec<f64> = curve.iter().zip(&harmonic).map(|(g, h)| g - h).collect();
+    let shift = curve[GAUGE] - fixed[GAUGE];
+    fixed.iter_mut().for_each(|v| *v += shift);
+    // Exactly the gauge's value (the shift can leave a rounding error there).
+    fixed[GAUGE] = curve[GAUGE];
+    make_monotonic(&fixed).0
+}
+
+/// The harmonic of period `period` (natural log units of `g`) that [`remove_step_periodic`]
+/// fits to `curve` from code `lo` up, per code (ln; faded linearly to zero below `lo`):
+/// `None` where the curve is too short, not finite, or the fit is singular.
+pub fn periodic_harmonic(curve: &[f64], period: f64, lo: usize) -> Option<Vec<f64>> {
     let n = curve.len();
-    if !(step.is_finite() && step > 0.0)
+    if !(period.is_finite() && period > 0.0)
         || n < lo + 17
+        || STEP_PERIODIC_HI.min(n - 1) < lo.max(1) + 16
         || n <= GAUGE
         || curve.iter().any(|v| !v.is_finite())
     {
-        return curve.to_vec();
+        return None;
     }
     let lo_fit = lo.max(1);
-    let hi_fit = n - 1;
-    let w = std::f64::consts::TAU / step;
+    let hi_fit = STEP_PERIODIC_HI.min(n - 1);
+    let w = std::f64::consts::TAU / period;
     let mut phase_from = curve.to_vec();
     let mut harmonic = vec![0.0; n];
     for _ in 0..STEP_PERIODIC_PASSES {
@@ -887,9 +923,7 @@ pub fn remove_step_periodic(curve: &[f64], step: f64, lo: usize) -> Vec<f64> {
                 }
             }
         }
-        let Some(x) = solve_small(ata, aty) else {
-            return curve.to_vec();
-        };
+        let x = solve_small(ata, aty)?;
         let h = |g: f64| x[5] * (w * g).sin() + x[6] * (w * g).cos();
         let at_lo = h(phase_from[lo_fit]);
         for (z, v) in harmonic.iter_mut().enumerate() {
@@ -901,11 +935,7 @@ pub fn remove_step_periodic(curve: &[f64], step: f64, lo: usize) -> Vec<f64> {
         }
         phase_from = curve.iter().zip(&harmonic).map(|(g, h)| g - h).collect();
     }
-    let shift = curve[GAUGE] - phase_from[GAUGE];
-    phase_from.iter_mut().for_each(|v| *v += shift);
-    // Exactly the gauge's value (the shift can leave a rounding error there).
-    phase_from[GAUGE] = curve[GAUGE];
-    make_monotonic(&phase_from).0
+    Some(harmonic)
 }
 
 /// Solves the symmetric system `a · x = b` (7 unknowns) by nalgebra's LU with partial
@@ -1890,30 +1920,49 @@ mod tests {
     }
 
     #[test]
-    fn step_periodic_is_off_by_default_and_not_written_when_off() {
+    fn step_periodic_is_the_covering_methods_and_asked_for_wins() {
+        // The default applies it where it resolves to the covering calibration (5+ frames),
+        // not below (joined); no other method applies it; none writes it but covering.
+        let auto = CalibrateOptions::default();
+        assert!(auto.for_frames(5).step_periodic_applies());
+        assert!(auto.for_frames(9).step_periodic_applies());
+        assert!(!auto.for_frames(4).step_periodic_applies());
+        assert!(!auto.for_frames(2).step_periodic_applies());
+        assert!(CalibrateOptions::covering().step_periodic_applies());
         for o in [
             CalibrateOptions::default(),
             CalibrateOptions::robust(),
-            CalibrateOptions::covering(),
             CalibrateOptions::joined(),
             CalibrateOptions::noise_fit(),
             CalibrateOptions::colour_hdri(),
         ] {
-            assert!(!o.step_periodic);
-            assert!(!o.for_frames(8).step_periodic);
+            assert!(!o.step_periodic_applies());
             let json = serde_json::to_string(&o).unwrap();
             assert!(!json.contains("step_periodic"), "{json}");
             let back: CalibrateOptions = serde_json::from_str(&json).unwrap();
             assert_eq!(back, o);
         }
-        let on = CalibrateOptions {
-            step_periodic: true,
+        assert_eq!(auto.for_frames(8).method_name(), "covering");
+        // Asked for, either way, it wins over the method's rule.
+        let ask = |v: bool| CalibrateOptions {
+            step_periodic: Some(v),
             ..CalibrateOptions::default()
         };
-        assert!(on.for_frames(8).step_periodic && on.for_frames(3).step_periodic);
-        let json = serde_json::to_string(&on).unwrap();
-        assert!(json.contains("\"step_periodic\":true"), "{json}");
-        assert_eq!(serde_json::from_str::<CalibrateOptions>(&json).unwrap(), on);
+        assert!(ask(true).for_frames(8).step_periodic_applies());
+        assert!(ask(true).for_frames(3).step_periodic_applies());
+        assert!(!ask(false).for_frames(8).step_periodic_applies());
+        assert_eq!(
+            ask(false).for_frames(8).method_name(),
+            "covering (options changed)"
+        );
+        for v in [true, false] {
+            let json = serde_json::to_string(&ask(v)).unwrap();
+            assert!(json.contains(&format!("\"step_periodic\":{v}")), "{json}");
+            assert_eq!(
+                serde_json::from_str::<CalibrateOptions>(&json).unwrap(),
+                ask(v)
+            );
+        }
     }
 
     #[test]

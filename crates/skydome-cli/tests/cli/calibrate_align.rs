@@ -215,3 +215,75 @@ fn calibrate_stores_the_noise_model_and_a_merge_with_it_gives_the_fits_bytes() {
     assert_eq!(na["differences"], 0);
     assert!(nb["differences"].as_u64().unwrap() > 0);
 }
+
+/// A profile made with `calibrate --step-periodic` on a wide-step bracket (5 × 3 EV) merges as
+/// the calibration would have merged right away: its stored noise model is fitted from code 24
+/// up as the merge's own fit is (`noise::estimate_for_calibration`), so `merge --profile`
+/// writes the same bytes as `merge --step-periodic`, and the same report about the model. The
+/// whole-range fit (what the profile stored before) gives a different model.
+#[test]
+fn a_step_periodic_profile_merges_as_its_calibration_did() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("wide");
+    std::fs::create_dir_all(&dir).unwrap();
+    let o = Command::new(BIN)
+        .args(["synth", "-o"])
+        .arg(&dir)
+        .args([
+            "--size",
+            "256",
+            "--evs=-6,-3,0,3,6",
+            "--seed",
+            "5",
+            "--quiet",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "jpg"))
+        .collect();
+    frames.sort();
+    assert_eq!(frames.len(), 5);
+    let times = dir.join("times.txt");
+    let with = |command: &str, extra: &[&std::ffi::OsStr]| {
+        let mut a: Vec<std::ffi::OsString> = vec![command.into()];
+        a.extend(frames.iter().map(|p| p.clone().into_os_string()));
+        a.extend(["--times-file".into(), times.clone().into_os_string()]);
+        a.extend(extra.iter().map(|&e| e.to_owned()));
+        run(&a)
+    };
+    let profile = tmp.path().join("wide_cam.json");
+    let cal = with(
+        "calibrate",
+        &[
+            "--step-periodic".as_ref(),
+            "--json".as_ref(),
+            "-o".as_ref(),
+            profile.as_os_str(),
+        ],
+    );
+    let merged = |name: &str, extra: &[&std::ffi::OsStr]| {
+        let out = tmp.path().join(name);
+        let mut e: Vec<&std::ffi::OsStr> = vec![
+            "--weighting".as_ref(),
+            "noise".as_ref(),
+            "--json".as_ref(),
+            "-o".as_ref(),
+            out.as_os_str(),
+        ];
+        e.extend(extra);
+        let report = with("merge", &e);
+        (std::fs::read(&out).unwrap(), report["noise"].clone())
+    };
+    let (a, na) = merged("calibrated.hdr", &["--step-periodic".as_ref()]);
+    let (b, nb) = merged("profile.hdr", &["--profile".as_ref(), profile.as_os_str()]);
+    assert_eq!(na["model"], nb["model"]);
+    assert_eq!(na["model"], cal["noise"]["model"], "{cal}");
+    assert!(a == b, "the .hdr differs");
+    // The whole-range fit, as a profile made without the correction's noise rule stored it.
+    let (_, nc) = merged("plain.hdr", &[]);
+    assert_ne!(na["model"], nc["model"]);
+}

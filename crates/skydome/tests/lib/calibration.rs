@@ -655,12 +655,12 @@ fn every_calibration_method_has_its_command_line_name() {
     }
 }
 
-/// The step-periodic correction (docs/accuracy.md, "Eleventh round") is opt-in: the default
-/// calibration leaves it off and gives what it gave before; switched on, it applies only to
-/// wide-step brackets (mean step ≥ 2.5 EV), where it changes the curve and says so, and a
-/// 2-EV bracket calibrates to the same bytes with it or without.
+/// The step-periodic correction (docs/accuracy.md, "Twelfth round") is the default's from five
+/// frames (the covering calibration) and can be turned off; it applies only to wide-step
+/// brackets (mean step ≥ 2.5 EV), where it changes the curve and says so, and a 2-EV bracket
+/// calibrates to the same bytes with it or without.
 #[test]
-fn the_step_periodic_correction_is_opt_in_and_only_for_wide_steps() {
+fn the_step_periodic_correction_is_the_defaults_and_only_for_wide_steps() {
     let bracket = |evs: Vec<f64>| {
         generate(&SynthOptions {
             width: 192,
@@ -670,14 +670,14 @@ fn the_step_periodic_correction_is_opt_in_and_only_for_wide_steps() {
         })
         .unwrap()
     };
-    let on = CalibrateOptions {
-        step_periodic: true,
+    let on = CalibrateOptions::default();
+    let off = CalibrateOptions {
+        step_periodic: Some(false),
         ..CalibrateOptions::default()
     };
-    assert!(!CalibrateOptions::default().step_periodic);
     // Five frames 3 EV apart: wide-step.
     let wide = bracket(vec![-6.0, -3.0, 0.0, 3.0, 6.0]);
-    let plain = calibrate(&wide.frames, wide.circle, &CalibrateOptions::default()).unwrap();
+    let plain = calibrate(&wide.frames, wide.circle, &off).unwrap();
     assert!(!plain.wide_step);
     let fixed = calibrate(&wide.frames, wide.circle, &on).unwrap();
     assert!(fixed.wide_step);
@@ -694,8 +694,33 @@ fn the_step_periodic_correction_is_opt_in_and_only_for_wide_steps() {
     }
     // Three frames 2 EV apart: not wide-step, so the same calibration.
     let narrow = bracket(vec![-2.0, 0.0, 2.0]);
-    let a = calibrate(&narrow.frames, narrow.circle, &CalibrateOptions::default()).unwrap();
+    let a = calibrate(&narrow.frames, narrow.circle, &off).unwrap();
     let b = calibrate(&narrow.frames, narrow.circle, &on).unwrap();
     assert!(!a.wide_step && !b.wide_step);
     assert_eq!(a.response, b.response);
+}
+
+/// A camera profile made from a step-periodic calibration stores the noise model the merge
+/// right after that calibration fits (from code 24 up, `noise::estimate_for_calibration`),
+/// not the whole-range fit, so a later `merge --profile` weighs the pixels as that merge did.
+/// On an 8 × 3 EV bracket with phone noise (the oracle's seed 9107, whose gain both fits
+/// measure) the two fits differ, and the profile holds the first.
+#[test]
+fn a_step_periodic_profile_stores_the_merges_noise_model() {
+    use skydome::noise::{estimate, estimate_for_calibration};
+    let c = crate::oracle::case_with_sun(9107, 8, (0.0, 87.0));
+    let on = CalibrateOptions {
+        step_periodic: Some(true),
+        ..CalibrateOptions::covering()
+    };
+    let cal = calibrate(&c.frames, c.circle, &on).unwrap();
+    assert!(cal.wide_step);
+    let mut profile = CameraProfile::from_calibration(&cal);
+    let stored = profile.estimate_noise(&c.frames, 0, cal.wide_step).unwrap();
+    let merges = estimate_for_calibration(&c.frames, &cal.response, 0, None, true);
+    let whole = estimate(&c.frames, &cal.response, 0, None);
+    assert!(!merges.from_prior.gain && !whole.from_prior.gain);
+    assert_eq!(stored.model, merges.model);
+    assert_ne!(merges.model, whole.model);
+    assert_eq!(profile.noise_estimate().unwrap().model, merges.model);
 }

@@ -804,7 +804,7 @@ fn a_camera_profile_carries_the_noise_model_and_a_merge_with_it_fits_none() {
     for (name, frames) in sets {
         let cal = calibrate(&frames, None, &CalibrateOptions::default()).unwrap();
         let mut p = CameraProfile::from_calibration(&cal);
-        let est = p.estimate_noise(&frames, 0).unwrap();
+        let est = p.estimate_noise(&frames, 0, false).unwrap();
         println!(
             "{name}: fitted {}, from prior [{}]",
             est.fitted,
@@ -907,7 +907,7 @@ fn a_profiles_noise_model_is_scaled_to_the_brackets_iso() {
     p.iso = Some(100.0);
 
     // The fitted model: scaled exactly, read and code noise kept.
-    p.estimate_noise(&a.frames, 0).unwrap();
+    p.estimate_noise(&a.frames, 0, false).unwrap();
     let stored = p.noise_estimate().unwrap();
     let scaled = p.noise_estimate_at_iso(Some(400.0)).unwrap();
     assert_eq!(scaled.scaled_from_iso, Some(100.0));

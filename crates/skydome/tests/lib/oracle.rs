@@ -866,7 +866,7 @@ pub fn curve_error(case: &Case, g: &[Vec<f64>; 3]) -> [f64; 4] {
 /// The calibrations tried while choosing the default's (see [`calibration_candidates`]):
 /// `SKYDOME_ORACLE_CANDIDATES`, `;`-separated, each a `,`-separated list of `key=value` on top
 /// of [`CalibrateOptions::noise_fit`] (keys `samples`, `cover`, `stratify`, `lo`, `hi`,
-/// `lambda`, `margin`, `bands`, `fit`, `patch`, `cut`, `periodic` (`1`: [`CalibrateOptions::step_periodic`]), `join` (`a-b`: the grid
+/// `lambda`, `margin`, `bands`, `fit`, `patch`, `cut`, `periodic` (`1` or `0`: [`CalibrateOptions::step_periodic`] asked for or off; `covering=1` has it), `join` (`a-b`: the grid
 /// calibration's toe, [`CalibrateOptions::toe_from_grid`]); `covering=1` starts again from
 /// [`CalibrateOptions::covering`], so put it first); `noise_fit` alone without the variable.
 /// The keys of [`Candidate`]'s wide-step rules are accepted and dropped here.
@@ -950,7 +950,7 @@ pub fn candidate_rules() -> Vec<Candidate> {
                 "wdrop" => c.wide_drop = Some(f as f32),
                 "wtwo" => c.wide_two_stage = Some(f as f32),
                 "wpair" => c.wide_pair = Some(f as f32),
-                "periodic" => o.step_periodic = f != 0.0,
+                "periodic" => o.step_periodic = Some(f != 0.0),
                 "wnoise" => c.wide_noise = f != 0.0,
                 other => panic!("unknown key {other}"),
             }
@@ -1045,7 +1045,7 @@ pub fn calibrate_candidate(
             frames,
             circle,
             &CalibrateOptions {
-                step_periodic: false,
+                step_periodic: Some(false),
                 ..o.clone()
             },
         )?;
@@ -1929,6 +1929,80 @@ fn bracket_diagnosis() {
                 })
                 .collect();
             println!("      ch {ch} z 24,40..: {}", row.join(" "));
+        }
+    }
+}
+
+/// What the step-periodic correction would take out of a wide-step bracket's curve and what
+/// was there to take (docs/accuracy.md, "Twelfth round"): per channel, the RMS over codes
+/// 24–254 of the harmonic [`skydome::response::periodic_harmonic`] fits at the bracket's step
+/// `P` and at periods that are not the step's (`0.6 P`, `0.75 P`, `1.25 P`), on the covering
+/// curve, on the true curve and on the curve's error (covering − truth), in ln.
+/// `SKYDOME_ORACLE_SEEDS` and `SKYDOME_ORACLE_FRAMES` pick the brackets (the sun over every
+/// height).
+#[test]
+#[ignore = "diagnosis: prints the step-periodic harmonics of chosen brackets"]
+fn step_periodic_diagnosis() {
+    use skydome::response::{periodic_harmonic, STEP_PERIODIC_LO};
+    let (seeds, _, ns) = bench_selection();
+    for &n in &ns {
+        for &seed in &seeds {
+            let c = case_with_sun(seed, n, (0.0, 87.0));
+            let step_ev = mean_step_ev(&c.frames);
+            let cal = calibrate(
+                &c.frames,
+                c.circle,
+                &CalibrateOptions::covering().for_frames(n),
+            )
+            .unwrap();
+            let o = &c.opts;
+            let p = step_ev * std::f64::consts::LN_2;
+            let curves = cal.response.curves();
+            let fixed = [0, 1, 2].map(|ch| {
+                skydome::response::remove_step_periodic(&curves[ch], p, STEP_PERIODIC_LO)
+            });
+            let (e0, e1) = (curve_error(&c, &curves), curve_error(&c, &fixed));
+            println!(
+                "{} (mean step {step_ev:.2} EV): curve error toe/middle/top, stops: {:.4} {:.4} {:.4} -> {:.4} {:.4} {:.4}",
+                c.label, e0[0], e0[1], e0[2], e1[0], e1[1], e1[2]
+            );
+            for ch in 0..3 {
+                let fit = cal.response.curve(ch).to_vec();
+                let truth: Vec<f64> = (0..256)
+                    .map(|z| {
+                        o.crf[ch]
+                            .inverse(
+                                ((z as f64) - o.black_level).max(0.5) / (255.0 - o.black_level),
+                            )
+                            .ln()
+                    })
+                    .collect();
+                let rms =
+                    |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+                let amp = |curve: &[f64], period: f64| {
+                    periodic_harmonic(curve, period, STEP_PERIODIC_LO)
+                        .map_or(f64::NAN, |h| rms(&h[24..=254]))
+                };
+                let row = |curve: &[f64]| {
+                    [1.0, 0.6, 0.75, 1.25]
+                        .map(|k| format!("{:.4}", amp(curve, k * p)))
+                        .join(" ")
+                };
+                // The harmonic the correction takes out against the truth's own.
+                let (hf, ht) = (
+                    periodic_harmonic(&fit, p, STEP_PERIODIC_LO).unwrap_or_default(),
+                    periodic_harmonic(&truth, p, STEP_PERIODIC_LO).unwrap_or_default(),
+                );
+                let d: Vec<f64> = (24..=254.min(hf.len().min(ht.len()).saturating_sub(1)))
+                    .map(|z| hf[z] - ht[z])
+                    .collect();
+                println!(
+                    "  ch {ch}: fit [{}]  truth [{}]  taken-out minus truth's {:.4}",
+                    row(&fit),
+                    row(&truth),
+                    rms(&d)
+                );
+            }
         }
     }
 }
