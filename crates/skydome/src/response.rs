@@ -316,12 +316,11 @@ pub struct CalibrateOptions {
     /// [`STEP_PERIODIC_HI`]), and the merge fits its noise model from codes
     /// [`crate::noise::WIDE_STEP_NOISE_LO`] up ([`Calibration::wide_step`]).
     ///
-    /// `None` is the method's own rule: on in [`CalibrateOptions::covering`] (`Some(true)`, so
-    /// the default calibration applies it from [`COVERING_FROM_FRAMES`] frames), off in every
-    /// other method (the joined calibration of 2–4 frames lost dim grounds with it).
-    /// `Some(v)` is asked for and wins over the method's rule, through
-    /// [`CalibrateOptions::for_frames`] too. Not written when `None`, so profiles and options
-    /// written before it read and write as before.
+    /// `None` (every named method) is the rule of [`CalibrateOptions::step_periodic_applies`]:
+    /// on with the covering calibration from [`COVERING_FROM_FRAMES`] frames (so the
+    /// default's), off otherwise. `Some(v)` is asked for and wins over the rule, through
+    /// [`CalibrateOptions::for_frames`] too. Not written when `None`, so options written before
+    /// it read and write as before.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub step_periodic: Option<bool>,
 }
@@ -445,10 +444,16 @@ impl CalibrateOptions {
         }
     }
 
-    /// Whether [`CalibrateOptions::step_periodic`] applies (on a wide-step bracket): as asked,
-    /// else off (the methods that apply it say `Some(true)`).
-    pub fn step_periodic_applies(&self) -> bool {
-        self.step_periodic == Some(true)
+    /// Whether [`CalibrateOptions::step_periodic`] applies to a wide-step bracket of `frames`
+    /// frames: as asked, else the covering calibration's rule — the covering draw without the
+    /// grid's toe, from [`COVERING_FROM_FRAMES`] frames (measured there; on 2–4 frames it read
+    /// some dim grounds worse, docs/accuracy.md "Twelfth round").
+    pub fn step_periodic_applies(&self, frames: usize) -> bool {
+        self.step_periodic.unwrap_or(
+            self.sampling.cover > 0
+                && self.toe_from_grid.is_none()
+                && frames >= COVERING_FROM_FRAMES,
+        )
     }
 
     /// The calibration that uses the data (issue 27): 2000 samples stratified over the middle
@@ -471,9 +476,9 @@ impl CalibrateOptions {
     /// The covering calibration (issue 27): 2000 samples spread over 16 code bands of every
     /// frame and channel ([`SampleOptions::covering`]; codes from 1 count as measured, so the
     /// darkest codes of the longest frame are sampled too), the noise-weighted fit
-    /// ([`Fit::Noise`]), λ = [`COVERING_LAMBDA`], and on wide-step brackets the step-periodic
-    /// correction ([`CalibrateOptions::step_periodic`] `Some(true)`; docs/accuracy.md "Twelfth
-    /// round"). `skydome calibrate --method covering`.
+    /// ([`Fit::Noise`]), λ = [`COVERING_LAMBDA`], and on wide-step brackets of 5 frames or
+    /// more the step-periodic correction ([`CalibrateOptions::step_periodic_applies`];
+    /// docs/accuracy.md "Twelfth round"). `skydome calibrate --method covering`.
     ///
     /// Chosen on the oracle's tuning brackets (seeds 1–3 and 11–22, see
     /// `tests/lib/oracle.rs`): mean sky ratio to the oracle with the noise merge, 2–9 frames,
@@ -495,7 +500,7 @@ impl CalibrateOptions {
             outlier_sigmas: COVERING_OUTLIER_SIGMAS,
             covering_from: None,
             toe_from_grid: None,
-            step_periodic: Some(true),
+            step_periodic: None,
         }
     }
 
@@ -508,7 +513,6 @@ impl CalibrateOptions {
     pub fn joined() -> Self {
         Self {
             toe_from_grid: Some(JOINED_TOE),
-            step_periodic: None,
             ..Self::covering()
         }
     }
@@ -808,7 +812,7 @@ fn fit_drawn(
         });
     }
     let mut cal = calibrate_samples_with(samples, lt, opts)?;
-    if opts.step_periodic_applies() && is_wide_step(lt) {
+    if opts.step_periodic_applies(lt.len()) && is_wide_step(lt) {
         let step = mean_step_ev(lt) * std::f64::consts::LN_2;
         let curves = cal.response.curves();
         let fixed = [0, 1, 2].map(|c| remove_step_periodic(&curves[c], step, STEP_PERIODIC_LO));
@@ -1922,21 +1926,26 @@ mod tests {
     #[test]
     fn step_periodic_is_the_covering_methods_and_asked_for_wins() {
         // The default applies it where it resolves to the covering calibration (5+ frames),
-        // not below (joined); no other method applies it; none writes it but covering.
+        // not below (joined); no other method applies it; no method writes it.
         let auto = CalibrateOptions::default();
-        assert!(auto.for_frames(5).step_periodic_applies());
-        assert!(auto.for_frames(9).step_periodic_applies());
-        assert!(!auto.for_frames(4).step_periodic_applies());
-        assert!(!auto.for_frames(2).step_periodic_applies());
-        assert!(CalibrateOptions::covering().step_periodic_applies());
+        assert!(auto.for_frames(5).step_periodic_applies(5));
+        assert!(auto.for_frames(9).step_periodic_applies(9));
+        assert!(!auto.for_frames(4).step_periodic_applies(4));
+        assert!(!auto.for_frames(2).step_periodic_applies(2));
+        assert!(CalibrateOptions::covering().step_periodic_applies(5));
+        assert!(!CalibrateOptions::covering().step_periodic_applies(4));
         for o in [
             CalibrateOptions::default(),
             CalibrateOptions::robust(),
+            CalibrateOptions::covering(),
             CalibrateOptions::joined(),
             CalibrateOptions::noise_fit(),
             CalibrateOptions::colour_hdri(),
         ] {
-            assert!(!o.step_periodic_applies());
+            assert!(o.step_periodic.is_none());
+            if o.sampling.cover == 0 || o.toe_from_grid.is_some() {
+                assert!(!o.step_periodic_applies(9));
+            }
             let json = serde_json::to_string(&o).unwrap();
             assert!(!json.contains("step_periodic"), "{json}");
             let back: CalibrateOptions = serde_json::from_str(&json).unwrap();
@@ -1948,9 +1957,9 @@ mod tests {
             step_periodic: Some(v),
             ..CalibrateOptions::default()
         };
-        assert!(ask(true).for_frames(8).step_periodic_applies());
-        assert!(ask(true).for_frames(3).step_periodic_applies());
-        assert!(!ask(false).for_frames(8).step_periodic_applies());
+        assert!(ask(true).for_frames(8).step_periodic_applies(8));
+        assert!(ask(true).for_frames(3).step_periodic_applies(3));
+        assert!(!ask(false).for_frames(8).step_periodic_applies(8));
         assert_eq!(
             ask(false).for_frames(8).method_name(),
             "covering (options changed)"
