@@ -249,7 +249,9 @@ pub fn oracle_with(case: &Case, curves: Option<&[Vec<f64>; 3]>) -> HdrImage {
 }
 
 /// skydome with nothing known: the curve calibrated from the frames with `calibration`, merged
-/// with the given weighting (the default merge's without one).
+/// with the given weighting (the default merge's without one). Where the calibration's
+/// step-periodic correction applied, the noise merge's model is fitted as the pipeline fits it
+/// then (`noise::estimate_for_calibration`, from code 24 up).
 pub fn skydome_merge(
     case: &Case,
     calibration: &CalibrateOptions,
@@ -259,6 +261,11 @@ pub fn skydome_merge(
     let mut opts = MergeOptions::default();
     if let Some(w) = weighting {
         opts.weighting = w;
+    }
+    if opts.weighting == Weighting::Noise && cal.wide_step {
+        let est =
+            skydome::noise::estimate_for_calibration(&case.frames, &cal.response, 0, None, true);
+        opts.noise = Some(est.model);
     }
     merge(&case.frames, &cal.response, &opts).unwrap().radiance
 }
@@ -563,24 +570,24 @@ fn the_noise_weighted_calibration_is_within_the_oracle_targets_on_held_out_brack
 }
 
 /// What the covering calibration (`--method covering`) with the noise merge reaches on the
-/// held-out seeds, mean ratio to the oracle per frame count 2–9: 1.050 1.033 1.039 1.025 1.007
-/// 1.017 1.036 1.046 — the targets ([`target`]) met at every count (outlier cut 5σ;
-/// at 4σ 1.043 1.032 1.039 1.025 1.007 1.018 1.036 1.045).
-pub const REACHED_COVERING: [f64; 8] = [1.050, 1.033, 1.039, 1.025, 1.007, 1.017, 1.036, 1.046];
+/// held-out seeds, mean ratio to the oracle per frame count 2–9: 1.050 1.033 1.039 1.025 1.001
+/// 1.014 1.017 1.034 — the targets ([`target`]) met at every count (with the
+/// step-periodic correction from five frames, docs/accuracy.md "Twelfth round"; without it
+/// 1.007 1.017 1.036 1.046 at 6–9 frames).
+pub const REACHED_COVERING: [f64; 8] = [1.050, 1.033, 1.039, 1.025, 1.001, 1.014, 1.017, 1.034];
 
-/// On the fresh held-out seeds ([`FRESH_SEEDS`], suns 3–90° high): 1.025 1.018 1.038 1.041
-/// 1.033 1.018 1.107 1.027 — every target met but 8 frames (4σ: 1.097 there). Its brackets
-/// vary most: one 8 × 3 EV bracket is at 1.47×, 14 % worse than on the grid calibration's
-/// curve (1.29×); another at 8 × 3 EV the other way round.
+/// On the fresh held-out seeds ([`FRESH_SEEDS`], suns 3–90° high): 1.025 1.018 1.038 1.030
+/// 1.022 1.017 1.035 1.026 — every target met. Without the step-periodic correction 1.041
+/// 1.033 1.018 1.107 1.027 at 5–9 frames: two 8 × 3 EV brackets at 1.47× and 1.58× (now 1.09×
+/// and 1.18×).
 pub const REACHED_COVERING_FRESH: [f64; 8] =
-    [1.025, 1.018, 1.038, 1.041, 1.033, 1.018, 1.107, 1.027];
+    [1.025, 1.018, 1.038, 1.030, 1.022, 1.017, 1.035, 1.026];
 
-/// What the default reaches on the fresh held-out seeds: the grid calibration's 1.077 1.041
-/// 1.115 at 2–4 frames, the covering calibration's from five — the targets met but at
-/// 4 frames (grid) and 8 frames (one 8 × 3 EV bracket, 1.47× the oracle, where the grid
-/// calibration's curve is 1.29×).
+/// What the default reaches on the fresh held-out seeds: the joined calibration's 1.024 1.024
+/// 1.051 at 2–4 frames, the covering calibration's (with the step-periodic correction) from
+/// five — the targets met at every count (8 frames 1.107 before the correction).
 pub const REACHED_DEFAULT_FRESH: [f64; 8] =
-    [1.024, 1.024, 1.051, 1.041, 1.033, 1.018, 1.107, 1.027];
+    [1.024, 1.024, 1.051, 1.030, 1.022, 1.017, 1.035, 1.026];
 
 /// The covering calibration against the oracle on `all`: the mean sky ratio per frame count
 /// within 0.5 % of `reached` (which the docs quote), no bracket's sky worse than the noise
@@ -646,15 +653,15 @@ fn the_covering_calibration_meets_the_oracle_targets_on_held_out_brackets() {
 
 /// The covering calibration on the fresh held-out set (suns 3–90° high, [`FRESH_SEEDS`]):
 /// within [`REACHED_COVERING_FRESH`], no bracket's sky more than 15 % worse than on the grid
-/// calibration's curve (the 8 × 3 EV bracket above: 14 %); the dim ground lost on 9 of the 96
-/// brackets (eight of 2–4 frames, one of 8: 0.22 stops against 0.18). The default
+/// calibration's curve; the dim ground lost on 8 of the 96 brackets, all of 2–4 frames (before
+/// the step-periodic correction also one of 8: 0.22 stops against 0.18). The default
 /// ([`default_sky`]) within [`REACHED_DEFAULT_FRESH`].
 #[test]
 fn the_covering_calibration_on_fresh_held_out_brackets() {
     let all = run_all_with(&FRESH_SEEDS, |seed, n| case_with_sun(seed, n, (0.0, 87.0)));
     let means = default_means(&all, "fresh");
     let lost = check_covering(&all, &REACHED_COVERING_FRESH, 1.15);
-    assert!(lost <= 9, "dim ground lost on {lost} brackets (docs: 9)");
+    assert!(lost <= 8, "dim ground lost on {lost} brackets (docs: 8)");
     for (n, (&m, &r)) in (2..=9).zip(means.iter().zip(&REACHED_DEFAULT_FRESH)) {
         assert!(m <= r + 0.005, "{n} frames: {m:.3} (docs {r:.3})");
     }
@@ -720,8 +727,9 @@ fn default_means(all: &[Measured], what: &str) -> Vec<f64> {
 
 /// What the default (noise merge, default calibration) reaches on the held-out seeds, mean
 /// ratio to the oracle at 2–9 frames: the joined calibration's below five frames (the grid
-/// calibration's there before: 1.172 1.125 1.117), the covering calibration's from five.
-pub const REACHED_DEFAULT: [f64; 8] = [1.087, 1.059, 1.049, 1.025, 1.007, 1.017, 1.036, 1.046];
+/// calibration's there before: 1.172 1.125 1.117), the covering calibration's from five (with
+/// the step-periodic correction; 1.007 1.017 1.036 1.046 at 6–9 frames without it).
+pub const REACHED_DEFAULT: [f64; 8] = [1.087, 1.059, 1.049, 1.025, 1.001, 1.014, 1.017, 1.034];
 
 /// The default against the oracle on the held-out seeds: within 0.5 % of [`REACHED_DEFAULT`]
 /// and the targets met at every count; below five frames (the joined calibration) no
