@@ -1968,7 +1968,7 @@ fn step_periodic_diagnosis() {
             let fixed = [0, 1, 2].map(|ch| {
                 skydome::response::remove_step_periodic(&curves[ch], p, STEP_PERIODIC_LO)
             });
-            let (e0, e1) = (curve_error(&c, &curves), curve_error(&c, &fixed));
+            let (e0, e1) = (curve_error(&c, curves), curve_error(&c, &fixed));
             println!(
                 "{} (mean step {step_ev:.2} EV): curve error toe/middle/top, stops: {:.4} {:.4} {:.4} -> {:.4} {:.4} {:.4}",
                 c.label, e0[0], e0[1], e0[2], e1[0], e1[1], e1[2]
