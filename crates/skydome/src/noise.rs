@@ -49,6 +49,14 @@
 //! measurement (lossless frames have quantisation only). With too few usable pixels the whole
 //! prior is used, and said so.
 //!
+//! **16-bit frames** are binned to 256 levels for the fit ([`crate::bracket::bin16`]), and
+//! their code-domain noise is not fitted but held at zero (`c = 1/12`, the binning's own
+//! quantisation): a 16-bit frame went through no JPEG and no 8-bit quantisation, and left free
+//! on gamma-like curves (where `g'(z)²` and `1/X_e` fall alike with the code) `c` took the
+//! shot noise's place — 0.9 codes of code noise and 40–70× the true electrons on 16-bit
+//! lossless brackets, whose merge lost 1.45× to the oracle (docs/accuracy.md, "Thirteenth
+//! round").
+//!
 //! ## Clipping
 //! A code of 0 or 255 is a bound, not a measurement; its weight is zero. Codes near full scale
 //! carry JPEG ringing from clipped neighbours, so the weight also fades linearly to zero over
@@ -432,7 +440,13 @@ pub fn estimate_from_code(
     if all_rows.iter().any(|r| r.len() < 4) {
         return fallback(total, total_bins);
     }
-    let Some(fit) = fit_shared(&all_rows) else {
+    // A 16-bit frame carries no JPEG or 8-bit quantisation noise: its code noise is only the
+    // binning to 256 levels done here (1/12 code²), held fixed. Left free, it takes the shot
+    // noise's place on gamma-like curves (slope² and 1/E fall alike with the code), which
+    // fitted 40–70× the true electrons on 16-bit lossless brackets (docs/accuracy.md,
+    // "Thirteenth round").
+    let sixteen = matches!(first.pixels, Pixels::U16(_));
+    let Some(fit) = fit_shared(&all_rows, sixteen.then_some(1.0 / 12.0)) else {
         return fallback(total, total_bins);
     };
     let prior = NoiseModel::default().channels[1];
@@ -549,8 +563,9 @@ impl Moments {
     }
 }
 
-/// Fits `(a, b, c_R, c_G, c_B)` for the white-balance factors on a log grid, keeping the best.
-fn fit_shared(rows: &[Vec<Row>; 3]) -> Option<SharedFit> {
+/// Fits `(a, b, c_R, c_G, c_B)` for the white-balance factors on a log grid, keeping the best;
+/// with `fixed_c`, every `c` is held at that value and only `a` and `b` are fitted.
+fn fit_shared(rows: &[Vec<Row>; 3], fixed_c: Option<f64>) -> Option<SharedFit> {
     let (lo, hi) = (WB_RANGE[0].ln(), WB_RANGE[1].ln());
     let moments = [0, 1, 2].map(|c| Moments::of(&rows[c]));
     // Channel c's row enters with `x = (r0 / w_c, r1 / w_c², r2)` at unknowns `(0, 1, 2 + c)`.
@@ -562,13 +577,30 @@ fn fit_shared(rows: &[Vec<Row>; 3]) -> Option<SharedFit> {
         for (c, mo) in moments.iter().enumerate() {
             let scale = [1.0 / w[c], 1.0 / (w[c] * w[c]), 1.0];
             let at = [0, 1, 2 + c];
-            for i in 0..3 {
-                atb[at[i]] += mo.v[i] * scale[i];
-                for k in 0..3 {
-                    ata[at[i]][at[k]] += mo.m[i][k] * scale[i] * scale[k];
+            match fixed_c {
+                None => {
+                    for i in 0..3 {
+                        atb[at[i]] += mo.v[i] * scale[i];
+                        for k in 0..3 {
+                            ata[at[i]][at[k]] += mo.m[i][k] * scale[i] * scale[k];
+                        }
+                    }
+                    s += mo.s;
+                }
+                Some(c0) => {
+                    // The known term moves to the target: `Σ wt² (x·(a, b) − (1 − c0 x₂))²`;
+                    // `c` itself is pinned by an identity row (`c = c0`, no residual).
+                    for i in 0..2 {
+                        atb[at[i]] += (mo.v[i] - c0 * mo.m[i][2]) * scale[i];
+                        for k in 0..2 {
+                            ata[at[i]][at[k]] += mo.m[i][k] * scale[i] * scale[k];
+                        }
+                    }
+                    ata[2 + c][2 + c] = 1.0;
+                    atb[2 + c] = c0;
+                    s += mo.s - 2.0 * c0 * mo.v[2] + c0 * c0 * mo.m[2][2] + c0 * c0;
                 }
             }
-            s += mo.s;
         }
         fit_nonneg_normal(&ata, &atb, s)
     };
@@ -830,7 +862,7 @@ mod tests {
                 })
                 .collect()
         });
-        let fit = fit_shared(&rows).unwrap();
+        let fit = fit_shared(&rows, None).unwrap();
         // The reference: the same grid search, each point fitted over the rows directly.
         let solve = |w: [f64; 3]| {
             let flat: Vec<([f64; 5], f64, f64)> = (0..3)
