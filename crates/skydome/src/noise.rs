@@ -49,6 +49,15 @@
 //! measurement (lossless frames have quantisation only). With too few usable pixels the whole
 //! prior is used, and said so.
 //!
+//! **16-bit frames** are fitted on their own values (`v / 257` on the 8-bit scale, `g`
+//! interpolated as the merge reads it, [`Response::g16`]), not binned to 256 levels, and their
+//! code-domain term is held at zero: a 16-bit frame went through no JPEG and no 8-bit
+//! quantisation. Binned, with the term free, the fit gave that term the shot noise's place (on
+//! gamma-like curves `g'(z)²` and `1/X_e` fall alike with the code): 0.9 codes of code noise and
+//! 40–70× the true electrons on 16-bit lossless brackets, whose merge lost up to 1.45× to the
+//! oracle; fitted on their values the gains come within 10 % of the truth there
+//! (docs/accuracy.md, "Thirteenth round").
+//!
 //! ## Clipping
 //! A code of 0 or 255 is a bound, not a measurement; its weight is zero. Codes near full scale
 //! carry JPEG ringing from clipped neighbours, so the weight also fades linearly to zero over
@@ -344,6 +353,13 @@ pub fn estimate_from_code(
     }
     let lt: Vec<f64> = frames.iter().map(|f| f.exposure.relative().ln()).collect();
     let (mut total, mut total_bins) = (0usize, 0usize);
+    let sixteen = matches!(first.pixels, Pixels::U16(_));
+    if sixteen {
+        let (rows, t) = rows_16(frames, response, mask, stride, lo, hi, &lt);
+        total = t;
+        total_bins = rows.iter().map(Vec::len).sum();
+        return finish_fit(rows, total, total_bins, Some(0.0), fallback);
+    }
     // How often each code pair `(z₁, z₂)` of adjacent frames occurs, per channel and frame
     // pair: [c][j][z₁ · 256 + z₂]. One sweep over the strided pixels reads each pixel's cache
     // line once for every channel and frame pair; a bin of the shorter frame's code then holds
@@ -429,10 +445,103 @@ pub fn estimate_from_code(
         }
         total_bins += rows.len();
     }
+    finish_fit(all_rows, total, total_bins, None, fallback)
+}
+
+/// The fit's rows for 16-bit frames, on their own values (`v / 257` on the 8-bit scale, `g`
+/// interpolated, [`Response::g16`]): no binning to 256 levels, so no quantisation term to
+/// confuse with the shot noise. Differences are kept per channel, frame pair and bin of the
+/// shorter frame's value; returns the rows and the differences used.
+fn rows_16(
+    frames: &[Frame],
+    response: &Response,
+    mask: Option<&[bool]>,
+    stride: usize,
+    lo: usize,
+    hi: usize,
+    lt: &[f64],
+) -> ([Vec<Row>; 3], usize) {
+    let np = frames[0].width * frames[0].height;
+    let pairs = frames.len() - 1;
+    let px: Vec<&[u16]> = frames
+        .iter()
+        .filter_map(|f| match &f.pixels {
+            Pixels::U16(v) => Some(v.as_slice()),
+            Pixels::U8(_) => None,
+        })
+        .collect();
+    let mut rows: [Vec<Row>; 3] = Default::default();
+    if px.len() != frames.len() {
+        return (rows, 0);
+    }
+    let (lo_f, hi_f) = (lo as f64, hi as f64);
+    let mut total = 0;
+    for (c, rows_c) in rows.iter_mut().enumerate() {
+        let g = response.curve(c);
+        // The regressors at a value on the 8-bit scale: `u = e^{−g}`, `s = g'²`, interpolated.
+        let at = |z: f64| -> (f64, f64) {
+            let i = (z.floor() as usize).min(LEVELS - 2);
+            let f = z - i as f64;
+            let gi = g[i] * (1.0 - f) + g[i + 1] * f;
+            let si = slope(g, i) * (1.0 - f) + slope(g, i + 1) * f;
+            ((-gi).exp(), si * si)
+        };
+        for j in 0..pairs {
+            let dl = lt[j + 1] - lt[j];
+            let mut d: Vec<Vec<f64>> = vec![Vec::new(); BINS];
+            let mut r: Vec<[f64; 3]> = vec![[0.0; 3]; BINS];
+            let mut p = 0;
+            while p < np {
+                if mask.is_none_or(|m| m[p]) {
+                    let (v1, v2) = (px[j][3 * p + c], px[j + 1][3 * p + c]);
+                    let (z1, z2) = (v1 as f64 / 257.0, v2 as f64 / 257.0);
+                    if (lo_f..=hi_f).contains(&z1) && (lo_f..=hi_f).contains(&z2) {
+                        let k = (((z1 - lo_f) * BINS as f64 / (hi_f - lo_f + 1.0)) as usize)
+                            .min(BINS - 1);
+                        d[k].push(response.g16(c, v2) - response.g16(c, v1) - dl);
+                        let ((u1, s1), (u2, s2)) = (at(z1), at(z2));
+                        r[k][0] += u1 + u2;
+                        r[k][1] += u1 * u1 + u2 * u2;
+                        r[k][2] += s1 + s2;
+                    }
+                }
+                p += stride;
+            }
+            for (dk, rk) in d.iter_mut().zip(&r) {
+                let len = dk.len();
+                if len < MIN_PER_BIN {
+                    continue;
+                }
+                let mut dc: Vec<(f64, u32)> = dk.iter().map(|&v| (v, 1)).collect();
+                let med = kth_counted(&mut dc, len / 2);
+                let mut dev: Vec<(f64, u32)> = dk.iter().map(|&v| ((v - med).abs(), 1)).collect();
+                let mad = kth_counted(&mut dev, len / 2) * 1.4826;
+                let var = mad * mad;
+                if !(var.is_finite() && var > 0.0) {
+                    continue;
+                }
+                let n = len as f64;
+                rows_c.push((rk.map(|v| v / n), var, n.sqrt()));
+                total += len;
+            }
+        }
+    }
+    (rows, total)
+}
+
+/// The shared-sensor fit on the rows (with `fixed_c`, the code-domain term held at that value)
+/// and the model it gives; `fallback` where there are too few rows or the fit fails.
+fn finish_fit(
+    all_rows: [Vec<Row>; 3],
+    total: usize,
+    total_bins: usize,
+    fixed_c: Option<f64>,
+    fallback: impl Fn(usize, usize) -> NoiseEstimate,
+) -> NoiseEstimate {
     if all_rows.iter().any(|r| r.len() < 4) {
         return fallback(total, total_bins);
     }
-    let Some(fit) = fit_shared(&all_rows) else {
+    let Some(fit) = fit_shared(&all_rows, fixed_c) else {
         return fallback(total, total_bins);
     };
     let prior = NoiseModel::default().channels[1];
@@ -462,7 +571,11 @@ pub fn estimate_from_code(
         channels: std::array::from_fn(|c| ChannelNoise {
             electrons_at_gauge: k * wb[c],
             read_noise: rn,
-            code_noise: (fit.c[c] - 1.0 / 12.0).max(0.0).sqrt(),
+            code_noise: if fixed_c.is_some() {
+                0.0
+            } else {
+                (fit.c[c] - 1.0 / 12.0).max(0.0).sqrt()
+            },
         }),
     };
     if !model.is_valid() {
@@ -549,8 +662,9 @@ impl Moments {
     }
 }
 
-/// Fits `(a, b, c_R, c_G, c_B)` for the white-balance factors on a log grid, keeping the best.
-fn fit_shared(rows: &[Vec<Row>; 3]) -> Option<SharedFit> {
+/// Fits `(a, b, c_R, c_G, c_B)` for the white-balance factors on a log grid, keeping the best;
+/// with `fixed_c`, every `c` is held at that value and only `a` and `b` are fitted.
+fn fit_shared(rows: &[Vec<Row>; 3], fixed_c: Option<f64>) -> Option<SharedFit> {
     let (lo, hi) = (WB_RANGE[0].ln(), WB_RANGE[1].ln());
     let moments = [0, 1, 2].map(|c| Moments::of(&rows[c]));
     // Channel c's row enters with `x = (r0 / w_c, r1 / w_c², r2)` at unknowns `(0, 1, 2 + c)`.
@@ -562,13 +676,30 @@ fn fit_shared(rows: &[Vec<Row>; 3]) -> Option<SharedFit> {
         for (c, mo) in moments.iter().enumerate() {
             let scale = [1.0 / w[c], 1.0 / (w[c] * w[c]), 1.0];
             let at = [0, 1, 2 + c];
-            for i in 0..3 {
-                atb[at[i]] += mo.v[i] * scale[i];
-                for k in 0..3 {
-                    ata[at[i]][at[k]] += mo.m[i][k] * scale[i] * scale[k];
+            match fixed_c {
+                None => {
+                    for i in 0..3 {
+                        atb[at[i]] += mo.v[i] * scale[i];
+                        for k in 0..3 {
+                            ata[at[i]][at[k]] += mo.m[i][k] * scale[i] * scale[k];
+                        }
+                    }
+                    s += mo.s;
+                }
+                Some(c0) => {
+                    // The known term moves to the target: `Σ wt² (x·(a, b) − (1 − c0 x₂))²`;
+                    // `c` itself is pinned by an identity row (`c = c0`, no residual).
+                    for i in 0..2 {
+                        atb[at[i]] += (mo.v[i] - c0 * mo.m[i][2]) * scale[i];
+                        for k in 0..2 {
+                            ata[at[i]][at[k]] += mo.m[i][k] * scale[i] * scale[k];
+                        }
+                    }
+                    ata[2 + c][2 + c] = 1.0;
+                    atb[2 + c] = c0;
+                    s += mo.s - 2.0 * c0 * mo.v[2] + c0 * c0 * mo.m[2][2] + c0 * c0;
                 }
             }
-            s += mo.s;
         }
         fit_nonneg_normal(&ata, &atb, s)
     };
@@ -830,7 +961,7 @@ mod tests {
                 })
                 .collect()
         });
-        let fit = fit_shared(&rows).unwrap();
+        let fit = fit_shared(&rows, None).unwrap();
         // The reference: the same grid search, each point fitted over the rows directly.
         let solve = |w: [f64; 3]| {
             let flat: Vec<([f64; 5], f64, f64)> = (0..3)

@@ -570,24 +570,27 @@ fn the_noise_weighted_calibration_is_within_the_oracle_targets_on_held_out_brack
 }
 
 /// What the covering calibration (`--method covering`) with the noise merge reaches on the
-/// held-out seeds, mean ratio to the oracle per frame count 2–9: 1.050 1.033 1.039 1.025 1.001
-/// 1.014 1.017 1.034 — the targets ([`target`]) met at every count (with the
-/// step-periodic correction from five frames, docs/accuracy.md "Twelfth round"; without it
-/// 1.007 1.017 1.036 1.046 at 6–9 frames).
-pub const REACHED_COVERING: [f64; 8] = [1.050, 1.033, 1.039, 1.025, 1.001, 1.014, 1.017, 1.034];
+/// held-out seeds, mean ratio to the oracle per frame count 2–9: 1.049 1.033 1.032 1.025 1.001
+/// 1.001 1.006 1.034 — the targets ([`target`]) met at every count (with the
+/// step-periodic correction from five frames, docs/accuracy.md "Twelfth round", and the
+/// 16-bit noise fit, "Thirteenth round"; before both 1.050 1.033 1.039 1.025 1.007 1.017 1.036
+/// 1.046).
+pub const REACHED_COVERING: [f64; 8] = [1.049, 1.033, 1.032, 1.025, 1.001, 1.001, 1.006, 1.034];
 
-/// On the fresh held-out seeds ([`FRESH_SEEDS`], suns 3–90° high): 1.025 1.018 1.038 1.030
-/// 1.022 1.017 1.035 1.026 — every target met. Without the step-periodic correction 1.041
+/// On the fresh held-out seeds ([`FRESH_SEEDS`], suns 3–90° high): 1.017 1.013 1.032 1.029
+/// 1.008 1.008 1.030 1.021 — every target met (1.025 1.018 1.038 1.030 1.022 1.017 1.035 1.026
+/// before the 16-bit noise fit). Without the step-periodic correction 1.041
 /// 1.033 1.018 1.107 1.027 at 5–9 frames: two 8 × 3 EV brackets at 1.47× and 1.58× (now 1.09×
 /// and 1.18×).
 pub const REACHED_COVERING_FRESH: [f64; 8] =
-    [1.025, 1.018, 1.038, 1.030, 1.022, 1.017, 1.035, 1.026];
+    [1.017, 1.013, 1.032, 1.029, 1.008, 1.008, 1.030, 1.021];
 
-/// What the default reaches on the fresh held-out seeds: the joined calibration's 1.024 1.024
-/// 1.051 at 2–4 frames, the covering calibration's (with the step-periodic correction) from
-/// five — the targets met at every count (8 frames 1.107 before the correction).
+/// What the default reaches on the fresh held-out seeds: the joined calibration's 1.022 1.018
+/// 1.038 at 2–4 frames, the covering calibration's (with the step-periodic correction) from
+/// five — the targets met at every count (8 frames 1.107 before the correction; 2–4
+/// frames 1.024 1.024 1.051 before the 16-bit noise fit).
 pub const REACHED_DEFAULT_FRESH: [f64; 8] =
-    [1.024, 1.024, 1.051, 1.030, 1.022, 1.017, 1.035, 1.026];
+    [1.022, 1.018, 1.038, 1.029, 1.008, 1.008, 1.030, 1.021];
 
 /// The covering calibration against the oracle on `all`: the mean sky ratio per frame count
 /// within 0.5 % of `reached` (which the docs quote), no bracket's sky worse than the noise
@@ -648,7 +651,9 @@ fn the_covering_calibration_meets_the_oracle_targets_on_held_out_brackets() {
     for (n, r) in (2..=9).zip(REACHED_COVERING) {
         assert!(r <= target(n), "{n} frames: {r}");
     }
-    assert!(lost <= 4, "dim ground lost on {lost} brackets (docs: 4)");
+    // 5 since the 16-bit noise fit: a 4-frame 16-bit bracket at 0.076 stops against the grid
+    // calibration's 0.064 (0.074 against 0.066 before).
+    assert!(lost <= 5, "dim ground lost on {lost} brackets (docs: 5)");
 }
 
 /// The covering calibration on the fresh held-out set (suns 3–90° high, [`FRESH_SEEDS`]):
@@ -728,8 +733,9 @@ fn default_means(all: &[Measured], what: &str) -> Vec<f64> {
 /// What the default (noise merge, default calibration) reaches on the held-out seeds, mean
 /// ratio to the oracle at 2–9 frames: the joined calibration's below five frames (the grid
 /// calibration's there before: 1.172 1.125 1.117), the covering calibration's from five (with
-/// the step-periodic correction; 1.007 1.017 1.036 1.046 at 6–9 frames without it).
-pub const REACHED_DEFAULT: [f64; 8] = [1.087, 1.059, 1.049, 1.025, 1.001, 1.014, 1.017, 1.034];
+/// the step-periodic correction and the 16-bit noise fit; 1.087 1.059 1.049 1.025 1.007 1.017
+/// 1.036 1.046 before both).
+pub const REACHED_DEFAULT: [f64; 8] = [1.087, 1.059, 1.040, 1.025, 1.001, 1.001, 1.006, 1.034];
 
 /// The default against the oracle on the held-out seeds: within 0.5 % of [`REACHED_DEFAULT`]
 /// and the targets met at every count; below five frames (the joined calibration) no
@@ -2012,4 +2018,52 @@ fn step_periodic_diagnosis() {
             }
         }
     }
+}
+
+/// 16-bit lossless brackets (docs/accuracy.md, "Thirteenth round"): the noise fit reads their
+/// own values and holds their code-domain noise at zero. Before, on values binned to 256 levels
+/// with that term free, it fitted about 0.9 codes of code noise and 40–70× the true electrons,
+/// and the default merge of these four brackets was 1.35–1.45× the oracle; now the green
+/// channel's electrons are within a factor of 5 of the truth (1.06, 1.70, 1.09 and 4.5 times
+/// it; 75× before on 9418) and the
+/// merge within 15 % of the oracle (1.013, 1.082, 1.013, 1.137).
+/// An 8-bit JPEG bracket's code noise is still fitted.
+#[test]
+fn sixteen_bit_brackets_fit_no_code_noise_and_merge_near_the_oracle() {
+    use skydome::noise::estimate;
+    for (seed, n) in [(9418, 8), (9415, 5), (9417, 7), (9524, 7)] {
+        let c = case_with_sun(seed, n, (0.0, 87.0));
+        assert!(c.label.contains("16-bit, lossless"), "{}", c.label);
+        let cal = calibrate(&c.frames, c.circle, &CalibrateOptions::default()).unwrap();
+        let est = estimate(&c.frames, &cal.response, 0, None);
+        assert!(
+            est.model.channels.iter().all(|ch| ch.code_noise == 0.0),
+            "{:?}",
+            est.model
+        );
+        let (fit, truth) = (
+            est.model.channels[1].electrons_at_gauge,
+            true_noise(&c).channels[1].electrons_at_gauge,
+        );
+        println!("seed {seed}: green {fit:.0} e⁻ at code 128 (truth {truth:.0})");
+        assert!(
+            !est.from_prior.gain && (0.2..5.0).contains(&(fit / truth)),
+            "seed {seed}: {fit} e⁻ against {truth}"
+        );
+        let (_, m) = measure_case(c);
+        let ratio = default_sky(&m) / m.sky[0];
+        println!(
+            "seed {seed}, {n} frames: the default {ratio:.3}× the oracle ({:.4} stops)",
+            m.sky[0]
+        );
+        assert!(
+            ratio <= 1.15,
+            "seed {seed}, {n} frames: {ratio:.3}× the oracle"
+        );
+    }
+    let c = case_with_sun(9107, 8, (0.0, 87.0));
+    assert!(c.label.contains("8-bit, JPEG"), "{}", c.label);
+    let cal = calibrate(&c.frames, c.circle, &CalibrateOptions::default()).unwrap();
+    let est = estimate(&c.frames, &cal.response, 0, None);
+    assert!(est.model.channels.iter().any(|ch| ch.code_noise > 0.0));
 }
