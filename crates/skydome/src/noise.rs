@@ -54,9 +54,9 @@
 //! code-domain term is held at zero: a 16-bit frame went through no JPEG and no 8-bit
 //! quantisation. Binned, with the term free, the fit gave that term the shot noise's place (on
 //! gamma-like curves `g'(z)²` and `1/X_e` fall alike with the code): 0.9 codes of code noise and
-//! 40–70× the true electrons on 16-bit lossless brackets, whose merge lost up to 1.45× to the
-//! oracle; fitted on their values the gains come within 10 % of the truth there
-//! (docs/accuracy.md, "Thirteenth round").
+//! 40–75× the true electrons on 16-bit lossless brackets, whose merge lost up to 1.45× to the
+//! oracle; fitted on their values the green gain came to 1.06–4.5× the truth on four such
+//! brackets and their merges to 1.01–1.14× the oracle (docs/accuracy.md, "Thirteenth round").
 //!
 //! ## Clipping
 //! A code of 0 or 255 is a bound, not a measurement; its weight is zero. Codes near full scale
