@@ -353,8 +353,7 @@ pub fn estimate_from_code(
     }
     let lt: Vec<f64> = frames.iter().map(|f| f.exposure.relative().ln()).collect();
     let (mut total, mut total_bins) = (0usize, 0usize);
-    let sixteen = matches!(first.pixels, Pixels::U16(_));
-    if sixteen {
+    if matches!(first.pixels, Pixels::U16(_)) {
         let (rows, t) = rows_16(frames, response, mask, stride, lo, hi, &lt);
         total = t;
         total_bins = rows.iter().map(Vec::len).sum();
@@ -478,13 +477,15 @@ fn rows_16(
     let mut total = 0;
     for (c, rows_c) in rows.iter_mut().enumerate() {
         let g = response.curve(c);
-        // The regressors at a value on the 8-bit scale: `u = e^{−g}`, `s = g'²`, interpolated.
-        let at = |z: f64| -> (f64, f64) {
+        // At a 16-bit value: `g` as the merge reads it, and the regressors `u = e^{−g}` and
+        // `s = g'²` (the slope interpolated on the 8-bit scale).
+        let at = |v: u16| -> (f64, f64, f64) {
+            let z = v as f64 / 257.0;
             let i = (z.floor() as usize).min(LEVELS - 2);
             let f = z - i as f64;
-            let gi = g[i] * (1.0 - f) + g[i + 1] * f;
+            let gi = response.g16(c, v);
             let si = slope(g, i) * (1.0 - f) + slope(g, i + 1) * f;
-            ((-gi).exp(), si * si)
+            (gi, (-gi).exp(), si * si)
         };
         for j in 0..pairs {
             let dl = lt[j + 1] - lt[j];
@@ -498,8 +499,8 @@ fn rows_16(
                     if (lo_f..=hi_f).contains(&z1) && (lo_f..=hi_f).contains(&z2) {
                         let k = (((z1 - lo_f) * BINS as f64 / (hi_f - lo_f + 1.0)) as usize)
                             .min(BINS - 1);
-                        d[k].push(response.g16(c, v2) - response.g16(c, v1) - dl);
-                        let ((u1, s1), (u2, s2)) = (at(z1), at(z2));
+                        let ((g1, u1, s1), (g2, u2, s2)) = (at(v1), at(v2));
+                        d[k].push(g2 - g1 - dl);
                         r[k][0] += u1 + u2;
                         r[k][1] += u1 * u1 + u2 * u2;
                         r[k][2] += s1 + s2;
@@ -512,10 +513,10 @@ fn rows_16(
                 if len < MIN_PER_BIN {
                     continue;
                 }
-                let mut dc: Vec<(f64, u32)> = dk.iter().map(|&v| (v, 1)).collect();
-                let med = kth_counted(&mut dc, len / 2);
-                let mut dev: Vec<(f64, u32)> = dk.iter().map(|&v| ((v - med).abs(), 1)).collect();
-                let mad = kth_counted(&mut dev, len / 2) * 1.4826;
+                // The median and the median absolute deviation, as for 8-bit frames.
+                let med = *dk.select_nth_unstable_by(len / 2, f64::total_cmp).1;
+                dk.iter_mut().for_each(|v| *v = (*v - med).abs());
+                let mad = *dk.select_nth_unstable_by(len / 2, f64::total_cmp).1 * 1.4826;
                 let var = mad * mad;
                 if !(var.is_finite() && var > 0.0) {
                     continue;

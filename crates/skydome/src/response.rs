@@ -891,7 +891,7 @@ pub fn remove_step_periodic(curve: &[f64], step: f64, lo: usize) -> Vec<f64> {
 pub fn periodic_harmonic(curve: &[f64], period: f64, lo: usize) -> Option<Vec<f64>> {
     let n = curve.len();
     if !(period.is_finite() && period > 0.0)
-        || n < lo + 17
+        || n <= 1
         || STEP_PERIODIC_HI.min(n - 1) < lo.max(1) + 16
         || n <= GAUGE
         || curve.iter().any(|v| !v.is_finite())
