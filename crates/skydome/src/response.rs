@@ -385,24 +385,33 @@ impl CalibrateOptions {
     /// [`CalibrateOptions::covering_from`] is set (the default), [`CalibrateOptions::covering`]
     /// from that many frames and [`CalibrateOptions::joined`] below (either with these options'
     /// sample seed and solver); else these options. Either way with `covering_from` `None`, so
-    /// the result resolves to itself.
+    /// the result resolves to itself. An asked-for [`CalibrateOptions::step_periodic`] that the
+    /// resolved method's rule would give anyway at `frames` frames is dropped (`None`), so the
+    /// result names its method as [`CalibrateOptions::method_name`] would without the ask.
     pub fn for_frames(&self, frames: usize) -> Self {
-        let named = |mut c: Self| {
-            c.sampling.seed = self.sampling.seed;
-            c.solver = self.solver;
-            if self.step_periodic.is_some() {
-                c.step_periodic = self.step_periodic;
+        let mut c = match self.covering_from {
+            Some(from) => {
+                let mut c = if frames >= from {
+                    Self::covering()
+                } else {
+                    Self::joined()
+                };
+                c.sampling.seed = self.sampling.seed;
+                c.solver = self.solver;
+                c
             }
-            c
-        };
-        match self.covering_from {
-            Some(from) if frames >= from => named(Self::covering()),
-            Some(_) => named(Self::joined()),
             None => Self {
                 covering_from: None,
+                step_periodic: None,
                 ..self.clone()
             },
+        };
+        if let Some(v) = self.step_periodic {
+            if v != c.step_periodic_applies(frames) {
+                c.step_periodic = Some(v);
+            }
         }
+        c
     }
 
     /// The name `skydome calibrate --method` gives these options: `auto` while
@@ -1964,6 +1973,23 @@ mod tests {
             ask(false).for_frames(8).method_name(),
             "covering (options changed)"
         );
+        // An ask the rule would grant anyway changes nothing, and is named so.
+        assert_eq!(ask(true).for_frames(8).method_name(), "covering");
+        assert_eq!(ask(false).for_frames(3).method_name(), "joined");
+        assert_eq!(
+            ask(true).for_frames(3).method_name(),
+            "joined (options changed)"
+        );
+        let covering_ask = CalibrateOptions {
+            step_periodic: Some(true),
+            ..CalibrateOptions::covering()
+        };
+        assert_eq!(covering_ask.for_frames(7).method_name(), "covering");
+        assert_eq!(
+            covering_ask.for_frames(4).method_name(),
+            "covering (options changed)"
+        );
+        assert!(covering_ask.for_frames(4).step_periodic_applies(4));
         for v in [true, false] {
             let json = serde_json::to_string(&ask(v)).unwrap();
             assert!(json.contains(&format!("\"step_periodic\":{v}")), "{json}");

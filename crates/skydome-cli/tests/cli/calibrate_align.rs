@@ -282,4 +282,21 @@ fn a_step_periodic_profile_merges_as_its_calibration_did() {
     // Without the correction: another curve, so another map.
     let (c, _) = merged("plain.hdr", &["--no-step-periodic".as_ref()]);
     assert!(a != c, "--no-step-periodic changed nothing");
+    // The report names the method: asking for what the default does at 5 frames changes
+    // nothing and says so; turning it off is a change.
+    assert_eq!(cal["calibration"], "covering", "{cal}");
+    let named = |flag: &str| {
+        with(
+            "calibrate",
+            &[
+                flag.as_ref(),
+                "--json".as_ref(),
+                "-o".as_ref(),
+                tmp.path().join(format!("named{flag}.json")).as_os_str(),
+            ],
+        )["calibration"]
+            .clone()
+    };
+    assert_eq!(named("--step-periodic"), "covering");
+    assert_eq!(named("--no-step-periodic"), "covering (options changed)");
 }
