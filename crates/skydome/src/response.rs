@@ -1138,7 +1138,7 @@ const CLIP_BAND: f64 = 48.0;
 /// The fewest frames with which the clipping test ([`CLIP_BAND`]) runs: the long brackets
 /// whose clipped observations pile up, where the covering calibration is the default
 /// ([`COVERING_FROM_FRAMES`]). On 3–4 frames it moved the oracle's mean sky ratios by ±0.003
-/// only, and on two frames it read two 2 × 3 EV brackets 23–33 % worse, none better
+/// only, and on two frames it read two 2 × 3 EV brackets 23–33 % worse and one 8 % better
 /// (docs/accuracy.md, "Fourteenth round").
 const CLIP_FROM_FRAMES: usize = COVERING_FROM_FRAMES;
 /// The one-sided cut of the clipping test ([`CLIP_BAND`]), in standard deviations of the code's
