@@ -278,8 +278,9 @@ pub fn run(a: Args, quiet: bool) -> Result<()> {
     };
     let spin = io::spinner(quiet, "calibrating");
     let calibration;
-    // The step-periodic correction applied (`--step-periodic` on a wide-step bracket): the
-    // stored noise model is then fitted from code 24 up, as the merge after it would fit it.
+    // The step-periodic correction applied (a wide-step bracket: by default from 5 frames, or
+    // asked for with `--step-periodic`): the stored noise model is then fitted from code 24 up,
+    // as the merge after it would fit it.
     let mut wide_step = false;
     let mut profile = if a.linear {
         CameraProfile::linear()

@@ -875,14 +875,14 @@ const STEP_PERIODIC_PASSES: usize = 3;
 /// part").
 ///
 /// On codes `lo..min(STEP_PERIODIC_HI, len − 1)` (the top band [`STEP_PERIODIC_HI`]–254 and
-/// the last code, often clipped, left out of the fit) the curve is fitted by least squares as a smooth model — a cubic in `z` plus a multiple of `ln z` —
-/// plus one harmonic `a·sin(2π g/step) + b·cos(2π g/step)`; only the harmonic is subtracted,
-/// from `lo` up, and linearly faded to zero from code `lo` down to code 0 (so the curve stays
-/// continuous). The harmonic's phase is taken from the curve itself, then from the corrected
+/// the last code, often clipped, left out of the fit) the curve is fitted by least squares as
+/// a smooth model — a cubic in `z` plus a multiple of `ln z` — plus one harmonic
+/// `a·sin(2π g/step) + b·cos(2π g/step)`; only the harmonic is subtracted, from `lo` up, and
+/// linearly faded to zero from code `lo` down to code 0 (so the curve stays continuous). The harmonic's phase is taken from the curve itself, then from the corrected
 /// curve ([`STEP_PERIODIC_PASSES`] passes). The result keeps `curve`'s value at [`GAUGE`] and
 /// is made non-decreasing (as the fit's curves are). A curve too short to fit (fewer than 16
-/// codes to fit from `lo`) or a `step` that is not finite and positive gives `curve` unchanged, as
-/// does a singular fit.
+/// codes to fit from `lo`) or a `step` that is not finite and positive gives `curve`
+/// unchanged, as does a singular fit.
 pub fn remove_step_periodic(curve: &[f64], step: f64, lo: usize) -> Vec<f64> {
     let Some(harmonic) = periodic_harmonic(curve, step, lo) else {
         return curve.to_vec();
