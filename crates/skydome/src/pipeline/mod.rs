@@ -513,17 +513,41 @@ fn shortest_at_ceiling(frames: &[bracket::Frame]) -> Vec<u32> {
 
 /// The pixels of `p` (the shortest frame) at [`CEILING_CODE`] or above in some channel; empty
 /// for 16-bit pixels.
+///
+/// In blocks of [`CEILING_BLOCK`] pixels, in parallel with the `parallel` feature: a block whose
+/// largest sample is below the ceiling (a loop that vectorises) is skipped, which is nearly every
+/// block of a shortest frame; the others are scanned pixel by pixel. The indices come out in
+/// ascending order, as from one scan (which took 17 ms natively and 27 ms in the browser on
+/// 12 MP, on one thread).
 fn at_ceiling(p: &bracket::Pixels) -> Vec<u32> {
-    match p {
-        bracket::Pixels::U8(v) => v
-            .chunks_exact(3)
+    let bracket::Pixels::U8(v) = p else {
+        return Vec::new();
+    };
+    let block = |(b, s): (usize, &[u8])| -> Vec<u32> {
+        if s.iter().copied().max().unwrap_or(0) < CEILING_CODE {
+            return Vec::new();
+        }
+        s.chunks_exact(3)
             .enumerate()
             .filter(|(_, p)| p.iter().any(|&c| c >= CEILING_CODE))
-            .map(|(i, _)| i as u32)
-            .collect(),
-        bracket::Pixels::U16(_) => Vec::new(),
-    }
+            .map(|(i, _)| (b * CEILING_BLOCK + i) as u32)
+            .collect()
+    };
+    #[cfg(feature = "parallel")]
+    let blocks: Vec<Vec<u32>> = {
+        use rayon::prelude::*;
+        v.par_chunks(3 * CEILING_BLOCK)
+            .enumerate()
+            .map(block)
+            .collect()
+    };
+    #[cfg(not(feature = "parallel"))]
+    let blocks: Vec<Vec<u32>> = v.chunks(3 * CEILING_BLOCK).enumerate().map(block).collect();
+    blocks.concat()
 }
+
+/// Pixels per block of [`at_ceiling`].
+const CEILING_BLOCK: usize = 4096;
 
 /// The clip mask the sky stage judges the sun by: the merge's flags, with the pixels at the
 /// shortest frame's ceiling flagged [`merge::CLIPPED_HIGH`] too.
@@ -1320,6 +1344,45 @@ fn detect_circle_in(frames: &[bracket::Frame]) -> Result<(CircleFit, RgbImage<u8
 mod tests {
     use super::*;
     use crate::fisheye::LensKind;
+
+    /// The blocked, parallel [`at_ceiling`] finds exactly the pixels of a plain scan, in order:
+    /// ceiling samples in every channel, at block edges, in a partial last block, and none.
+    #[test]
+    fn at_ceiling_matches_a_plain_scan() {
+        let plain = |v: &[u8]| -> Vec<u32> {
+            v.chunks_exact(3)
+                .enumerate()
+                .filter(|(_, p)| p.iter().any(|&c| c >= CEILING_CODE))
+                .map(|(i, _)| i as u32)
+                .collect()
+        };
+        let n = 3 * CEILING_BLOCK + 1234;
+        let mut v = vec![0u8; 3 * n];
+        // A deterministic spread of codes 0..=255 (an LCG's high bits), so about 2 % of the
+        // samples reach 250.
+        let mut x = 12345u32;
+        for s in v.iter_mut() {
+            x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            *s = (x >> 24) as u8;
+        }
+        // Whole blocks with nothing at the ceiling, and pixels on the blocks' edges.
+        for s in &mut v[3 * CEILING_BLOCK..6 * CEILING_BLOCK] {
+            *s = (*s).min(CEILING_CODE - 1);
+        }
+        for (i, c) in [
+            (CEILING_BLOCK - 1, 0),
+            (2 * CEILING_BLOCK, 2),
+            (3 * CEILING_BLOCK - 1, 1),
+            (n - 1, 2),
+        ] {
+            v[3 * i + c] = CEILING_CODE;
+        }
+        let want = plain(&v);
+        assert!(want.len() > 100, "{}", want.len());
+        assert_eq!(at_ceiling(&bracket::Pixels::U8(v.clone())), want);
+        assert!(at_ceiling(&bracket::Pixels::U8(vec![CEILING_CODE - 1; 3 * n])).is_empty());
+        assert!(at_ceiling(&bracket::Pixels::U16(vec![u16::MAX; 3 * n])).is_empty());
+    }
 
     /// A small synthetic fish-eye bracket (420 × 360), its lens and the options of a plain
     /// crop to the dome.

@@ -117,9 +117,20 @@ pub struct RadianceStats {
 #[inline(always)]
 pub(crate) fn fast_log2(x: f32) -> f32 {
     if x < f32::MIN_POSITIVE {
-        return x.log2();
+        return log2_subnormal(x);
     }
     log2_normal(x)
+}
+
+/// The standard `log2`, out of line. Inline, `x.log2()` is LLVM's `llvm.log2` intrinsic, which
+/// may be executed speculatively: in a loop with a branch to it for the rare subnormal, LLVM
+/// made the call unconditional and selected its result, and on wasm32 (where `log2f` is a
+/// software routine, not the C library's) that call for every pixel cost the browser's tone map
+/// about 30 ms of CPU on 12 MP. A call to an ordinary function is not speculated.
+#[cold]
+#[inline(never)]
+fn log2_subnormal(x: f32) -> f32 {
+    x.log2()
 }
 
 use crate::fastmath::log2 as log2_normal;
@@ -201,7 +212,11 @@ impl Acc {
             }
             for (&l, &g) in lum[..n].iter().zip(&lg[..n]) {
                 if l > 0.0 && l < f32::INFINITY {
-                    let g = if l < f32::MIN_POSITIVE { l.log2() } else { g };
+                    let g = if l < f32::MIN_POSITIVE {
+                        log2_subnormal(l)
+                    } else {
+                        g
+                    };
                     row_sum += g;
                     row_n += 1;
                     lo = min(l, lo);
