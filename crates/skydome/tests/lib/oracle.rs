@@ -921,6 +921,9 @@ pub struct Candidate {
     /// (as where [`CalibrateOptions::step_periodic`] applied) without the curve's correction,
     /// to tell the two parts of the eleventh round apart.
     pub wide_noise: bool,
+    /// `both=1`: one fit on the candidate's samples and the grid calibration's samples together
+    /// (the candidate's options, no join) instead of a joined toe (fifteenth round).
+    pub both: bool,
 }
 
 /// [`candidates`] with their wide-step rules ([`Candidate`]).
@@ -935,6 +938,7 @@ pub fn candidate_rules() -> Vec<Candidate> {
         wide_two_stage: None,
         wide_pair: None,
         wide_noise: false,
+        both: false,
     };
     let mut out = vec![plain("noise_fit", CalibrateOptions::noise_fit())];
     for cand in spec.split(';').filter(|c| !c.trim().is_empty()) {
@@ -970,6 +974,7 @@ pub fn candidate_rules() -> Vec<Candidate> {
                 "wpair" => c.wide_pair = Some(f as f32),
                 "periodic" => o.step_periodic = Some(f != 0.0),
                 "wnoise" => c.wide_noise = f != 0.0,
+                "both" => c.both = f != 0.0,
                 other => panic!("unknown key {other}"),
             }
         }
@@ -1000,6 +1005,20 @@ pub fn calibrate_candidate(
         o.lambda = l;
     }
     let cal = calibrate(frames, circle, &o)?;
+    let cal = match cand.both {
+        false => cal,
+        true => {
+            let mut g = CalibrateOptions::robust();
+            g.sampling.seed = o.sampling.seed;
+            let grid_samples = skydome::sampling::sample(frames, circle, &g.sampling)?;
+            let mut s = cal.samples.clone();
+            s.positions.extend_from_slice(&grid_samples.positions);
+            s.values.extend_from_slice(&grid_samples.values);
+            let mut plain = o.clone();
+            plain.toe_from_grid = None;
+            calibrate_samples_with(s, &cal.log_times, &plain)?
+        }
+    };
     let refit = |keep: &dyn Fn(&skydome::sampling::Samples, usize, usize, usize) -> bool| {
         let s = &cal.samples;
         let mut s2 = s.clone();
