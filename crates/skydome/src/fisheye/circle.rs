@@ -399,9 +399,7 @@ fn boundary_point(
             break;
         }
     }
-    let Some(first) = first else {
-        return None;
-    };
+    let first = first?;
     // Starting inside the image means the circle is cut by the frame on this ray.
     if first < 3 {
         return None;
