@@ -78,7 +78,7 @@ test('isolated page: the threaded core runs on a pool and writes the CLI\'s byte
 // per picture (lens circle, tone map and statistics, checks, noise fit, merge). Each round
 // reports the stages that ran and gave what they should; if one stopped (or failed early),
 // the first merge would again run it in baseline code, and this fails.
-const WARM_UP_STAGES = ['lens circle', 'preview tone map', 'luminance statistics', 'bracket checks, noise fit and merge'];
+const WARM_UP_STAGES = ['lens circle', 'preview tone map', 'luminance statistics', 'bracket checks, noise fit and merge', 'the whole pipeline'];
 test('the idle warm-up runs all its steps and every stage of its stages rounds, in both cores', async () => {
   const server = await serve();
   const p = await phone(server.origin);

@@ -968,10 +968,7 @@ pub fn warm_up(size: usize) -> Result<(), WebError> {
             bytes,
         });
     }
-    let options = parse_options(
-        r#"{"lens": {"detect": {"model": "stereographic", "fov_deg": 235, "circle": null}},
-            "sky": {"crop": true, "north_deg": 0, "sun": "auto"}, "products": {"preview": true}}"#,
-    )?;
+    let options = parse_options(WARM_UP_OPTIONS)?;
     let outcome = Outcome::from_dome(run_frames(frames, Some(times), &options, &mut |_, _| {
         false
     })?);
@@ -1063,11 +1060,12 @@ const WARM_UP_STAGES_SIDE: usize = 384;
 pub const WARM_UP_STAGES_ROUNDS: usize = 4;
 
 /// The stages [`warm_up_stages`] runs, in its report's order.
-pub const WARM_UP_STAGES: [&str; 4] = [
+pub const WARM_UP_STAGES: [&str; 5] = [
     "lens circle",
     "preview tone map",
     "luminance statistics",
     "bracket checks, noise fit and merge",
+    "the whole pipeline",
 ];
 
 /// One round of the stages a merge calls once over a whole picture and that a small warm-up
@@ -1152,16 +1150,46 @@ pub fn warm_up_stages(side: usize) -> Result<Vec<&'static str>, WebError> {
     if warm_up_merge(side / 2)? {
         ran.push(WARM_UP_STAGES[3]);
     }
+    if warm_up_pipeline(side)? {
+        ran.push(WARM_UP_STAGES[4]);
+    }
     Ok(ran)
 }
 
-/// The bracket checks, the noise model's fit and the noise-weighted merge of a synthetic
-/// `side`² fish-eye bracket (three 8-bit frames, 2 EV apart, through their true response), as
-/// the pipeline calls them ([`skydome::bracket::assemble`], [`skydome::noise::estimate`],
-/// [`skydome::merge::merge`] with the fitted model, clipping flags, and the merge's warnings).
-/// Returns whether all three frames were kept, the noise model was fitted and the merge gave a
-/// radiance of the bracket's size.
-fn warm_up_merge(side: usize) -> Result<bool, WebError> {
+/// The app's options for a merge of a fish-eye bracket (the lens circle found, the dome
+/// cropped, the sun found, the preview), as [`warm_up`] and [`warm_up_pipeline`] run them.
+const WARM_UP_OPTIONS: &str = r#"{"lens": {"detect": {"model": "stereographic", "fov_deg": 235, "circle": null}},
+    "sky": {"crop": true, "north_deg": 0, "sun": "auto"}, "products": {"preview": true}}"#;
+
+/// The whole pipeline ([`skydome::pipeline::run`]) with the app's options ([`WARM_UP_OPTIONS`])
+/// on a synthetic `side`² fish-eye bracket, its frames given decoded (the decoder has its own
+/// warm-up, [`warm_up_decoding`]). Returns whether it made a dome and its preview.
+///
+/// Why: the stages above call the functions a merge spends most of its time in, but a merge
+/// also runs passes of its own over whole pictures that nothing else calls: the best-exposed
+/// frame's count, the shortest frame's ceiling pixels, the dome's crop, the sun's luminance
+/// plane, the sky's statistics, the calibration's sample lattice. V8's compile trace of the first
+/// 12 MP merge after the four stages' rounds (`web-tests/profile.mjs --trace`,
+/// `tools/wasm_compiles.py`) still showed 21 functions optimised during it, these among them,
+/// their first call running in the baseline code: the ceiling scan alone took 11.6 ms of CPU in
+/// the first merge and too little to sample in the second. [`warm_up`]'s one 256² merge is too
+/// small to spend their budgets; four rounds at 384² are not.
+fn warm_up_pipeline(side: usize) -> Result<bool, WebError> {
+    let (b, decoded) = synthetic_bracket(side)?;
+    let times = b.frames_times;
+    let options = parse_options(WARM_UP_OPTIONS)?;
+    let dome = run_input(
+        Frames::Decoded(decoded),
+        Some(times),
+        &options,
+        &mut |_, _| false,
+    )?;
+    Ok(dome.radiance.width > 0 && dome.preview.is_some())
+}
+
+/// A synthetic `side`² fish-eye bracket (`skydome::synth`, lossless 8-bit frames) with its frames
+/// as the decoder would hand them over (their times as if from EXIF).
+fn synthetic_bracket(side: usize) -> Result<(SynthRest, Vec<DecodedFrame>), WebError> {
     use skydome::synth::{generate, SynthOptions};
     let b = generate(&SynthOptions {
         width: side,
@@ -1171,7 +1199,7 @@ fn warm_up_merge(side: usize) -> Result<bool, WebError> {
         ..SynthOptions::default()
     })
     .map_err(|e| WebError::Encode(e.to_string()))?;
-    let n = b.frames.len();
+    let frames_times = b.frames.iter().map(|f| f.exposure.time_s).collect();
     let decoded = b
         .frames
         .into_iter()
@@ -1187,6 +1215,33 @@ fn warm_up_merge(side: usize) -> Result<bool, WebError> {
             non_srgb_icc: None,
         })
         .collect();
+    let rest = SynthRest {
+        true_g: b.true_g,
+        circle: b.circle,
+        frames_times,
+    };
+    Ok((rest, decoded))
+}
+
+/// What [`synthetic_bracket`] keeps of the synthetic bracket besides its frames.
+struct SynthRest {
+    /// The true response curves (`g(z)`, natural log, per channel).
+    true_g: [Vec<f64>; 3],
+    /// The lens circle, in pixels (origin top-left).
+    circle: Option<Circle>,
+    /// The frames' exposure times, seconds, in frame order.
+    frames_times: Vec<f64>,
+}
+
+/// The bracket checks, the noise model's fit and the noise-weighted merge of a synthetic
+/// `side`² fish-eye bracket (three 8-bit frames, 2 EV apart, through their true response), as
+/// the pipeline calls them ([`skydome::bracket::assemble`], [`skydome::noise::estimate`],
+/// [`skydome::merge::merge`] with the fitted model, clipping flags, and the merge's warnings).
+/// Returns whether all three frames were kept, the noise model was fitted and the merge gave a
+/// radiance of the bracket's size.
+fn warm_up_merge(side: usize) -> Result<bool, WebError> {
+    let (b, decoded) = synthetic_bracket(side)?;
+    let n = decoded.len();
     let br = skydome::bracket::assemble(decoded, None, Default::default())
         .map_err(|e| WebError::Pipeline(e.into()))?;
     let response = skydome::response::Response::from_curves(b.true_g)

@@ -98,9 +98,12 @@ const ready = loadCore().then(({ m, wasm, info }) => {
 //   each on the test machine), the stages a merge calls once over a whole picture, on 384²
 //   synthetic pictures (`?stageside=N` on this worker's URL; skydome_web::warm_up_stages: the
 //   lens circle's detection, the preview's tone map, the sky's statistics, the bracket checks,
-//   the noise fit and the merge): after one 256² merge, or four, V8 still optimised 24 of their
-//   functions during the first 12 MP merge (web-tests/profile.mjs --trace), after these steps
-//   about 9. Each step reports the stages it ran (`warmUp` below, for the tests).
+//   the noise fit and the merge, then the whole pipeline on a 384² bracket): after one 256²
+//   merge, or four, V8 still optimised 24 of their functions during the first 12 MP merge
+//   (web-tests/profile.mjs --trace), after these steps without the whole pipeline 21 (the
+//   merge's own passes over whole pictures: the ceiling scan, the best-exposed count, the
+//   crop, the sky's statistics). Each step reports the stages it ran (`warmUp` below, for the
+//   tests).
 const reserveMiB = countParam('reserve', 160);
 const warmUps = countParam('warmup', 1);
 /** The stages each `warm_up_stages` step ran, in order (for web-tests). */
