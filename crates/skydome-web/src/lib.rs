@@ -1175,8 +1175,8 @@ const WARM_UP_OPTIONS: &str = r#"{"lens": {"detect": {"model": "stereographic", 
 /// the first merge and too little to sample in the second. [`warm_up`]'s one 256² merge is too
 /// small to spend their budgets; four rounds at 384² are not.
 fn warm_up_pipeline(side: usize) -> Result<bool, WebError> {
-    let (b, decoded) = synthetic_bracket(side)?;
-    let times = b.frames_times;
+    let (_, decoded) = synthetic_bracket(side)?;
+    let times = decoded.iter().filter_map(|f| f.exif_time_s).collect();
     let options = parse_options(WARM_UP_OPTIONS)?;
     let dome = run_input(
         Frames::Decoded(decoded),
@@ -1187,11 +1187,14 @@ fn warm_up_pipeline(side: usize) -> Result<bool, WebError> {
     Ok(dome.radiance.width > 0 && dome.preview.is_some())
 }
 
-/// A synthetic `side`² fish-eye bracket (`skydome::synth`, lossless 8-bit frames) with its frames
-/// as the decoder would hand them over (their times as if from EXIF).
-fn synthetic_bracket(side: usize) -> Result<(SynthRest, Vec<DecodedFrame>), WebError> {
+/// A synthetic `side`² fish-eye bracket (`skydome::synth`, lossless 8-bit frames) and its frames
+/// as the decoder would hand them over (their times as if from EXIF); the bracket's own
+/// `frames` are taken out (left empty).
+fn synthetic_bracket(
+    side: usize,
+) -> Result<(skydome::synth::SynthBracket, Vec<DecodedFrame>), WebError> {
     use skydome::synth::{generate, SynthOptions};
-    let b = generate(&SynthOptions {
+    let mut b = generate(&SynthOptions {
         width: side,
         height: side,
         fisheye: true,
@@ -1199,9 +1202,7 @@ fn synthetic_bracket(side: usize) -> Result<(SynthRest, Vec<DecodedFrame>), WebE
         ..SynthOptions::default()
     })
     .map_err(|e| WebError::Encode(e.to_string()))?;
-    let frames_times = b.frames.iter().map(|f| f.exposure.time_s).collect();
-    let decoded = b
-        .frames
+    let decoded = std::mem::take(&mut b.frames)
         .into_iter()
         .map(|f| DecodedFrame {
             name: f.name,
@@ -1215,22 +1216,7 @@ fn synthetic_bracket(side: usize) -> Result<(SynthRest, Vec<DecodedFrame>), WebE
             non_srgb_icc: None,
         })
         .collect();
-    let rest = SynthRest {
-        true_g: b.true_g,
-        circle: b.circle,
-        frames_times,
-    };
-    Ok((rest, decoded))
-}
-
-/// What [`synthetic_bracket`] keeps of the synthetic bracket besides its frames.
-struct SynthRest {
-    /// The true response curves (`g(z)`, natural log, per channel).
-    true_g: [Vec<f64>; 3],
-    /// The lens circle, in pixels (origin top-left).
-    circle: Option<Circle>,
-    /// The frames' exposure times, seconds, in frame order.
-    frames_times: Vec<f64>,
+    Ok((b, decoded))
 }
 
 /// The bracket checks, the noise model's fit and the noise-weighted merge of a synthetic

@@ -255,8 +255,7 @@ pub enum Fit {
     Hat,
     /// Iterated reweighted least squares: weights from the noise the residuals show at each
     /// code, observations beyond [`CalibrateOptions::outlier_sigmas`] standard deviations
-    /// dropped, and observations near 255 that the pixel's shorter frames show clipped
-    /// dropped.
+    /// dropped, as are observations near 255 that the pixel's shorter frames show clipped.
     Noise,
 }
 
@@ -878,8 +877,9 @@ const STEP_PERIODIC_PASSES: usize = 3;
 /// the last code, often clipped, left out of the fit) the curve is fitted by least squares as
 /// a smooth model — a cubic in `z` plus a multiple of `ln z` — plus one harmonic
 /// `a·sin(2π g/step) + b·cos(2π g/step)`; only the harmonic is subtracted, from `lo` up, and
-/// linearly faded to zero from code `lo` down to code 0 (so the curve stays continuous). The harmonic's phase is taken from the curve itself, then from the corrected
-/// curve ([`STEP_PERIODIC_PASSES`] passes). The result keeps `curve`'s value at [`GAUGE`] and
+/// linearly faded to zero from code `lo` down to code 0 (so the curve stays continuous). The
+/// harmonic's phase is taken from the curve itself, then from the corrected curve
+/// ([`STEP_PERIODIC_PASSES`] passes). The result keeps `curve`'s value at [`GAUGE`] and
 /// is made non-decreasing (as the fit's curves are). A curve too short to fit (fewer than 16
 /// codes to fit from `lo`) or a `step` that is not finite and positive gives `curve`
 /// unchanged, as does a singular fit.

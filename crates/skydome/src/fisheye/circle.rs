@@ -365,21 +365,7 @@ fn boundary_point(
     let a = i as f64 * std::f64::consts::TAU / RAYS as f64;
     let (dx, dy) = (a.cos(), a.sin());
     // Distance from centre to the frame edge (pixel-centre box) along the ray.
-    let tx = if dx > 0.0 {
-        (wf - 0.5 - cx) / dx
-    } else if dx < 0.0 {
-        (0.5 - cx) / dx
-    } else {
-        f64::INFINITY
-    };
-    let ty = if dy > 0.0 {
-        (hf - 0.5 - cy) / dy
-    } else if dy < 0.0 {
-        (0.5 - cy) / dy
-    } else {
-        f64::INFINITY
-    };
-    let t_edge = tx.min(ty);
+    let t_edge = to_edge(cx, dx, wf).min(to_edge(cy, dy, hf));
     if !(t_edge.is_finite() && t_edge > 4.0) {
         return None;
     }
@@ -429,6 +415,18 @@ fn boundary_point(
     };
     let t = t_edge - ((k - 1) as f64 + frac) * STEP;
     Some((cx + t * dx, cy + t * dy))
+}
+
+/// Distance along one axis from `c` to the pixel-centre box `0.5 ..= size − 0.5`, moving by `d`
+/// per unit of the ray (∞ when `d` is 0).
+fn to_edge(c: f64, d: f64, size: f64) -> f64 {
+    if d > 0.0 {
+        (size - 0.5 - c) / d
+    } else if d < 0.0 {
+        (0.5 - c) / d
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// Algebraic (Kåsa) least-squares circle through points: minimises Σ(x²+y²+Dx+Ey+F)².
